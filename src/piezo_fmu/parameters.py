@@ -1,0 +1,146 @@
+"""Parameters of the piezo-impact damper, in SI units, under the paper's symbols.
+
+The defaults are the nominal case of MODEL.md section 7 (Table 1 of Afsharfard and
+Farshidianfar, 2014, with ``p(0) = q(0) = 10 mm`` and ``R_L = 52 kOhm``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+#: ``barrier_mode`` values: derive ``M_eq``/``K_eq`` from the beam geometry, or take them as given.
+DERIVED = 0
+EXPLICIT = 1
+
+#: The equivalent mass and stiffness printed in the paper (kg, N/m); see MODEL.md section 4.
+PRINTED_M_EQ = 0.0292
+PRINTED_K_EQ = 46.7753e6
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Allowed range of one parameter: ``lo < value`` (or ``<=``) and ``value < hi`` (or ``<=``)."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = True
+    hi_open: bool = True
+
+    def contains(self, value: float) -> bool:
+        above = value > self.lo if self.lo_open else value >= self.lo
+        below = value < self.hi if self.hi_open else value <= self.hi
+        return above and below
+
+    def describe(self) -> str:
+        left = "(" if self.lo_open else "["
+        right = ")" if self.hi_open else "]"
+        return f"{left}{self.lo:g}, {self.hi:g}{right}"
+
+
+POSITIVE = Bound(0.0, math.inf)
+NON_NEGATIVE = Bound(0.0, math.inf, lo_open=False)
+FINITE = Bound()
+
+
+def _p(default: float, unit: str, description: str, bound: Bound = POSITIVE):
+    return field(default=default, metadata={"unit": unit, "description": description, "bound": bound})
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """Every Table 1 quantity, the load, the initial conditions and the barrier mode.
+
+    All values are SI. Construction validates every value and raises ``ValueError``
+    naming the parameter, the value and the allowed range.
+    """
+
+    # The damper (Table 1, third row).
+    M: float = _p(1.0, "kg", "Main mass, including the equivalent tip mass of the barriers")
+    K: float = _p(1000.0, "N/m", "Stiffness of the main spring")
+    C: float = _p(0.1, "N.s/m", "Viscous damping of the main mass", NON_NEGATIVE)
+    m: float = _p(0.1, "kg", "Impact mass")
+    d: float = _p(8e-3, "m", "Gap: the impact mass is free while |q - p| < d/2")
+    C_eq: float = _p(10.0, "N.s/m", "Equivalent contact damping of a barrier", NON_NEGATIVE)
+    # The steel barrier beam (Table 1, first row).
+    E_b: float = _p(200e9, "Pa", "Young's modulus of the barrier beam")
+    L: float = _p(80e-3, "m", "Length of the barrier beam")
+    t_b: float = _p(5e-3, "m", "Thickness of the barrier beam")
+    W_b: float = _p(5e-3, "m", "Width of the barrier beam")
+    rho_b: float = _p(7850.0, "kg/m3", "Density of the barrier beam")
+    x1: float = _p(10e-3, "m", "Distance of the patch from the clamped end", NON_NEGATIVE)
+    # The PZT-5H patch (Table 1, second row).
+    E_p: float = _p(62e9, "Pa", "Young's modulus of the piezoelectric patch")
+    L_p: float = _p(10e-3, "m", "Length of the piezoelectric patch")
+    t_p: float = _p(3e-3, "m", "Thickness of the piezoelectric patch")
+    W_p: float = _p(4e-3, "m", "Width of the piezoelectric patch")
+    rho_p: float = _p(7800.0, "kg/m3", "Density of the piezoelectric patch")
+    g31: float = _p(0.008, "V.m/N", "Piezoelectric voltage constant g31 (magnitude)")
+    # Electrical load.
+    R_load: float = _p(52e3, "Ohm", "Load resistance across each patch")
+    # Initial conditions (absolute displacements and velocities).
+    p0: float = _p(10e-3, "m", "Initial displacement of the main mass", FINITE)
+    q0: float = _p(10e-3, "m", "Initial displacement of the impact mass", FINITE)
+    dp0: float = _p(0.0, "m/s", "Initial velocity of the main mass", FINITE)
+    dq0: float = _p(0.0, "m/s", "Initial velocity of the impact mass", FINITE)
+    # Barrier equivalents: derived from the geometry (0) or taken as given (1).
+    barrier_mode: int = field(
+        default=DERIVED,
+        metadata={"unit": "1", "description": "0: derive M_eq, K_eq from the geometry; 1: use M_eq, K_eq as given",
+                  "bound": Bound(DERIVED, EXPLICIT, lo_open=False, hi_open=False)},
+    )
+    M_eq: float = _p(PRINTED_M_EQ, "kg", "Equivalent tip mass of a barrier (explicit mode only)")
+    K_eq: float = _p(PRINTED_K_EQ, "N/m", "Equivalent tip stiffness of a barrier (explicit mode only)")
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "barrier_mode":
+                if isinstance(value, bool) or value not in (DERIVED, EXPLICIT):
+                    raise ValueError(f"barrier_mode = {value!r} is not allowed; allowed values are 0 (derived) or 1 (explicit)")
+                object.__setattr__(self, f.name, int(value))
+                continue
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{f.name} = {value!r} is not a number; allowed range {f.metadata['bound'].describe()} {f.metadata['unit']}") from None
+            if not math.isfinite(value):
+                raise ValueError(f"{f.name} = {value!r} is not finite; allowed range {f.metadata['bound'].describe()} {f.metadata['unit']}")
+            bound: Bound = f.metadata["bound"]
+            if not bound.contains(value):
+                raise ValueError(f"{f.name} = {value!r} {f.metadata['unit']} is out of range; allowed range {bound.describe()}")
+            object.__setattr__(self, f.name, value)
+        if self.x1 + self.L_p > self.L:
+            raise ValueError(
+                f"x1 = {self.x1!r} m puts the patch past the beam end: x1 + L_p must be <= L, "
+                f"so the allowed range of x1 is [0, {self.L - self.L_p:g}] m")
+        if abs(self.q0 - self.p0) > self.d / 2:
+            raise ValueError(
+                f"q0 = {self.q0!r} m starts the impact mass outside the gap: |q0 - p0| must be <= d/2, "
+                f"so the allowed range of q0 is [{self.p0 - self.d / 2:g}, {self.p0 + self.d / 2:g}] m")
+        # M_eq is part of M (MODEL.md section 3), so M must exceed it; checked here for both modes.
+        from .barrier import derive_barrier  # local import: barrier depends on this module
+
+        m_eq = derive_barrier(self).M_eq
+        if self.M <= m_eq:
+            raise ValueError(
+                f"M = {self.M!r} kg must exceed the barrier tip mass M_eq = {m_eq:g} kg; "
+                f"allowed range ({m_eq:g}, inf) kg")
+
+    def replace(self, **changes) -> "Parameters":
+        """A copy with some values changed, validated anew."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict:
+        """All values by name (SI), JSON-safe."""
+        return dataclasses.asdict(self)
+
+
+def parameter_info() -> dict[str, dict]:
+    """Unit, description, bound and default of every parameter, by name."""
+    return {
+        f.name: {"unit": f.metadata["unit"], "description": f.metadata["description"],
+                 "bound": f.metadata["bound"], "default": f.default}
+        for f in dataclasses.fields(Parameters)
+    }
