@@ -1,0 +1,79 @@
+"""Exact propagation of a linear phase ``x' = A x`` over short brackets.
+
+Both phases of the damper are linear with constant coefficients once the base input is a
+first-order hold (MODEL.md sections 2-3). In deviation coordinates from the moving base,
+``u = p - y(t)`` and ``w = q - y(t)``, the ramp of the hold is the exact particular solution,
+so the state ``x = (u, w, u', w', 1)`` obeys ``x' = A x`` (the constant 1 carries the contact
+offset ``d/2``). Its solution is ``x(t0 + s tau) = exp(A s tau) x(t0)``.
+
+On a bracket of length ``tau <= THETA / rho(A)`` (``rho`` the spectral radius), the series of the
+matrix exponential is summed to ``ORDER`` terms, which is exact to rounding: the first omitted
+term is below ``THETA**(ORDER+1) / (ORDER+1)! ~ 2e-20`` of the state. Each bracket is thus a
+polynomial of degree ``ORDER`` in the normalised time ``s in [0, 1]``, which makes event
+location (``roots.py``) and the energy integrals of the ledger exact polynomial operations.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Terms kept of the exponential series on one bracket.
+ORDER = 16
+#: Bracket length times the spectral radius of ``A``: each mode turns by at most THETA radians.
+THETA = 0.5
+
+_K = np.arange(ORDER + 1)
+#: ``HILBERT[j, k] = 1 / (j + k + 1)``: ``int_0^1 s^j s^k ds``, for quadratic integrals.
+HILBERT = 1.0 / (_K[:, None] + _K[None, :] + 1.0)
+#: ``1 / (k + 1)``: ``int_0^1 s^k ds``.
+INTEGRAL = 1.0 / (_K + 1.0)
+
+
+class LinearPhase:
+    """The exact flow of ``x' = A x`` over brackets of at most ``h`` seconds.
+
+    Parameters
+    ----------
+    A : (n, n) array
+        State matrix, SI units (1/s and 1/s^2 entries).
+    """
+
+    def __init__(self, A: np.ndarray):
+        self.A = np.asarray(A, dtype=float)
+        rho = float(np.max(np.abs(np.linalg.eigvals(self.A))))
+        #: s, the longest bracket: each mode turns by at most THETA rad within it.
+        self.h = THETA / rho if rho > 0 else math.inf
+        n = self.A.shape[0]
+        terms = np.empty((ORDER + 1, n, n))
+        terms[0] = np.eye(n)
+        for k in range(1, ORDER + 1):
+            terms[k] = terms[k - 1] @ self.A / k
+        # (A^k / k!) stacked so that one product gives every Taylor coefficient of x.
+        self._terms = terms
+
+    def coefficients(self, x: np.ndarray, tau: float) -> np.ndarray:
+        """Taylor coefficients ``c`` with ``x(t0 + s tau) = sum_k c[k] s^k``, shape (ORDER+1, n)."""
+        return (self._terms @ x) * (tau ** _K)[:, None]
+
+
+def powers(s: float) -> np.ndarray:
+    """``s^k`` for k = 0..ORDER."""
+    return s ** _K
+
+
+def evaluate(c: np.ndarray, s: float) -> np.ndarray:
+    """Value at normalised time ``s`` of a polynomial (or a stack of them, along axis 0)."""
+    return powers(s) @ c
+
+
+def integral(a: np.ndarray, s_end: float) -> float:
+    """``int_0^s_end a(s) ds`` for power coefficients ``a``."""
+    return float(s_end * np.dot(a * powers(s_end), INTEGRAL))
+
+
+def integral_of_square(a: np.ndarray, s_end: float) -> float:
+    """``int_0^s_end a(s)^2 ds`` for power coefficients ``a``, exact."""
+    b = a * powers(s_end)
+    return float(s_end * (b @ HILBERT @ b))

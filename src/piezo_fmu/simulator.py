@@ -1,0 +1,494 @@
+"""Event-driven, exact simulation of the piezo-impact damper (MODEL.md sections 1-6).
+
+The motion alternates between two linear phases: free flight (a damped oscillator driven by
+the base, and a free particle) and contact with one barrier (the 2-DOF system of MODEL.md
+section 3). Each is propagated exactly (``propagation.py``); phase switches, the deflection
+peaks that give the impact voltages, and the maxima of ``p`` that give the damping
+inclination are located as roots on the exact trajectory (``roots.py``). Nothing is stepped
+with a fixed step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .barrier import derive_barrier
+from .metrics import MetricAccumulators, Metrics
+from .parameters import Parameters
+from .propagation import ORDER, LinearPhase, evaluate, integral, integral_of_square
+from .roots import crossings
+
+FREE = 0
+RIGHT = +1
+LEFT = -1
+#: Switches allowed at one instant before the run is declared degenerate.
+MAX_SWITCHES_AT_ONE_INSTANT = 8
+#: Relative size, against the gap, under which an event function at a bracket start is zero.
+_ZERO = 1e-13
+
+# Columns of the deviation state x = (u, w, u', w', 1), with u = p - y(t), w = q - y(t).
+U, W, DU, DW, ONE = range(5)
+
+
+@dataclass(frozen=True)
+class State:
+    """The state at time ``t`` (s): absolute displacements (m) and velocities (m/s).
+
+    ``side`` is 0 in free flight, +1 in contact with the right barrier (``q - p = +d/2`` side),
+    -1 with the left one. ``y`` (m) and ``v`` (m/s) are the base displacement and velocity.
+    """
+
+    t: float
+    p: float
+    dp: float
+    q: float
+    dq: float
+    side: int
+    y: float
+    v: float
+
+
+@dataclass
+class Impact:
+    """One contact with a barrier.
+
+    ``time`` (s) is the onset, ``side`` +1 (right) or -1 (left), ``rel_velocity`` (m/s) the
+    relative velocity ``q' - p'`` at onset before the tip mass is captured,
+    ``max_deflection`` (m) the peak barrier tip deflection, ``voltage`` (V) the impact voltage
+    ``V_i = k_V max_deflection``, ``duration`` (s) the contact time (NaN while the contact lasts).
+    ``dp_*``/``dq_*`` (m/s) are the absolute velocities just before and after the onset and the
+    separation switches, and ``capture_loss``/``release_loss`` (J) the plastic losses there.
+    """
+
+    time: float
+    side: int
+    rel_velocity: float
+    dp_before: float
+    dq_before: float
+    dp_after: float
+    dq_after: float
+    capture_loss: float
+    max_deflection: float = 0.0
+    voltage: float = math.nan
+    duration: float = math.nan
+    dp_sep_before: float = math.nan
+    dq_sep_before: float = math.nan
+    dp_sep_after: float = math.nan
+    dq_sep_after: float = math.nan
+    release_loss: float = math.nan
+
+
+@dataclass(frozen=True)
+class EnergyLedger:
+    """Energy bookkeeping since the start, J.
+
+    ``kinetic``, ``potential_K`` and ``potential_Keq`` are the present energies; the others
+    accumulate: viscous dissipation in ``C`` and ``C_eq``, ``plastic`` losses of tip-mass
+    capture and release, and ``work_base``, the work the base did on the device (including
+    jumps of a base displacement set by the host). ``initial`` is the energy at the start.
+    """
+
+    kinetic: float
+    potential_K: float
+    potential_Keq: float
+    dissipated_C: float
+    dissipated_Ceq: float
+    plastic: float
+    work_base: float
+    initial: float
+
+    @property
+    def total(self) -> float:
+        """Present mechanical energy, J."""
+        return self.kinetic + self.potential_K + self.potential_Keq
+
+    @property
+    def dissipated(self) -> float:
+        """All energy dissipated so far, J."""
+        return self.dissipated_C + self.dissipated_Ceq + self.plastic
+
+    @property
+    def balance_error(self) -> float:
+        """``total - (initial + work_base - dissipated)``, J: zero for exact bookkeeping."""
+        return self.total - (self.initial + self.work_base - self.dissipated)
+
+
+_MAXIMUM, _PEAK = 0, 1
+
+
+@dataclass
+class _Bracket:
+    """One bracket of the present phase: its exact trajectory and its located events.
+
+    ``c`` holds the Taylor coefficients of the deviation state over ``[t_start, t_start + tau]``
+    (normalised time ``s`` in [0, 1]); ``base`` (m) and ``v`` (m/s) are the base there. The
+    phase switches at ``s_switch`` (inf: not in this bracket) to side ``switch_to``; ``events``
+    are the non-terminal events ``(s, kind)`` still ahead; ``s`` is where the state stands.
+    """
+
+    c: np.ndarray
+    t_start: float
+    tau: float
+    base: float
+    v: float
+    s: float = 0.0
+    s_switch: float = math.inf
+    switch_to: int = FREE
+    events: list = field(default_factory=list)
+    delta: np.ndarray | None = None
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["c"] = self.c.tolist()
+        data["delta"] = None if self.delta is None else self.delta.tolist()
+        data["events"] = [list(e) for e in self.events]
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "_Bracket":
+        data = dict(data)
+        data["c"] = np.array(data["c"], dtype=float)
+        data["delta"] = None if data["delta"] is None else np.array(data["delta"], dtype=float)
+        data["events"] = [(float(s), int(k)) for s, k in data["events"]]
+        return cls(**data)
+
+
+@dataclass
+class _Accounts:
+    dissipated_C: float = 0.0
+    dissipated_Ceq: float = 0.0
+    plastic: float = 0.0
+    work_base: float = 0.0
+    initial: float = 0.0
+
+
+class Simulator:
+    """The damper from ``t0`` on, advanced by :meth:`advance` with any chop of time.
+
+    Parameters
+    ----------
+    params : Parameters
+        The damper, SI.
+    y0, v0 : float
+        Base displacement (m) and velocity (m/s) at ``t0``.
+    t0 : float
+        Start time, s.
+    log_limit : int or None
+        Most impacts and maxima kept in :attr:`impacts` and :attr:`maxima` (the oldest are
+        dropped); the metrics never depend on it. None keeps all.
+    """
+
+    def __init__(self, params: Parameters, y0: float = 0.0, v0: float = 0.0, t0: float = 0.0,
+                 log_limit: int | None = None):
+        _check_finite(y0=y0, v0=v0, t0=t0)
+        self.params = params
+        self.barrier = derive_barrier(params)
+        M, m, K, C = params.M, params.m, params.K, params.C
+        M_eq, K_eq, C_eq = self.barrier.M_eq, self.barrier.K_eq, params.C_eq
+        self._M_contact = M - M_eq
+        self._m_contact = m + M_eq
+        self._free = LinearPhase(_free_matrix(M, K, C))
+        self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side))
+                         for side in (RIGHT, LEFT)}
+        self._zero = _ZERO * params.d
+
+        self.t = float(t0)
+        self._p, self._dp, self._q, self._dq = params.p0, params.dp0, params.q0, params.dq0
+        self._side = FREE
+        self._y, self._v = float(y0), float(v0)
+        self._accounts = _Accounts()
+        self._accounts.initial = self.energy.total
+        self._acc = MetricAccumulators()
+        self._open: Impact | None = None
+        self._impacts: deque[Impact] = deque(maxlen=log_limit)
+        self._maxima: deque[tuple[float, float]] = deque(maxlen=log_limit)
+        self._bracket: _Bracket | None = None
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def state(self) -> State:
+        return State(self.t, self._p, self._dp, self._q, self._dq, self._side, self._y, self._v)
+
+    @property
+    def in_contact(self) -> bool:
+        return self._side != FREE
+
+    def deflection(self, side: int) -> float:
+        """Tip deflection (m) of the barrier on ``side`` (+1 right, -1 left); 0 when not in contact."""
+        if self._side != side:
+            return 0.0
+        return max(0.0, side * (self._q - self._p) - self.params.d / 2)
+
+    def voltage(self, side: int) -> float:
+        """Quasi-static patch voltage (V) of the barrier on ``side``: ``k_V`` times its deflection."""
+        return self.barrier.k_V * self.deflection(side)
+
+    @property
+    def base_force(self) -> float:
+        """Force (N) the device exerts on its base through ``K`` and ``C``, positive along +x."""
+        return self.params.K * (self._p - self._y) + self.params.C * (self._dp - self._v)
+
+    @property
+    def impacts(self) -> list[Impact]:
+        """Logged contacts, oldest first, the one in progress (if any) last."""
+        return list(self._impacts) + ([self._open] if self._open else [])
+
+    @property
+    def maxima(self) -> list[tuple[float, float]]:
+        """Maxima ``(t, p)`` of the main-mass displacement (s, m), oldest first."""
+        return list(self._maxima)
+
+    @property
+    def metrics(self) -> Metrics:
+        return self._acc.metrics(self.params.R_load)
+
+    @property
+    def energy(self) -> EnergyLedger:
+        p = self.params
+        if self._side == FREE:
+            kinetic = 0.5 * (p.M * self._dp**2 + p.m * self._dq**2)
+            potential_Keq = 0.0
+        else:
+            kinetic = 0.5 * (self._M_contact * self._dp**2 + self._m_contact * self._dq**2)
+            delta = self._side * (self._q - self._p) - p.d / 2
+            potential_Keq = 0.5 * self.barrier.K_eq * delta**2
+        a = self._accounts
+        return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
+                            potential_Keq=potential_Keq, dissipated_C=a.dissipated_C,
+                            dissipated_Ceq=a.dissipated_Ceq, plastic=a.plastic,
+                            work_base=a.work_base, initial=a.initial)
+
+    @property
+    def bracket_lengths(self) -> dict[str, float]:
+        """Longest bracket (s) of each phase: ``THETA / rho(A)`` (see ``propagation.py``)."""
+        return {"free": self._free.h, "contact": self._contact[RIGHT].h}
+
+    # ------------------------------------------------------------------ stepping
+    def advance(self, t_end: float, y: float, v: float) -> None:
+        """Integrate to ``t_end`` (s) with the base ``y + v (t - t_now)`` (m), velocity ``v`` (m/s).
+
+        Raises ``ValueError`` for a non-finite argument or ``t_end`` not after the present time.
+        A call that continues the previous one's base motion (same ``v``, and ``y`` where the
+        previous call left the base) goes on with the same brackets, so how time is chopped
+        changes no event and no switch.
+        """
+        _check_finite(t_end=t_end, y=y, v=v)
+        if not t_end > self.t:
+            raise ValueError(f"t_end = {t_end!r} s must be after the present time t = {self.t!r} s")
+        if y != self._y or v != self._v:
+            if y != self._y:
+                # The host moved the base end of the spring: that work enters the ledger.
+                self._accounts.work_base += 0.5 * self.params.K * ((self._p - y) ** 2 - (self._p - self._y) ** 2)
+            self._y, self._v = float(y), float(v)
+            self._bracket = None
+        instant_switches = 0
+        while True:
+            if self._bracket is None:
+                self._bracket = self._open_bracket()
+            br = self._bracket
+            s_stop = min(1.0, (t_end - br.t_start) / br.tau)
+            s_to = min(s_stop, br.s_switch)
+            while br.events and br.events[0][0] <= s_to:
+                self._non_terminal_event(br, *br.events.pop(0))
+            self._integrate_ledger(br, s_to)
+            if br.s_switch <= s_stop:
+                self._move_to(br, br.s_switch, br.t_start + br.s_switch * br.tau)
+                instant_switches = instant_switches + 1 if br.s_switch == 0.0 else 0
+                if instant_switches > MAX_SWITCHES_AT_ONE_INSTANT:
+                    raise RuntimeError(f"{instant_switches} phase switches at t = {self.t!r} s without progress")
+                self._switch(br.switch_to)
+                self._bracket = None
+                continue
+            if s_stop == 1.0:
+                self._move_to(br, 1.0, br.t_start + br.tau)
+                self._bracket = None
+                if self.t < t_end:
+                    continue
+            else:
+                self._move_to(br, s_stop, t_end)
+            break
+        self.t = t_end
+
+    def _move_to(self, br: "_Bracket", s: float, t: float) -> None:
+        """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
+        x = evaluate(br.c, s)
+        base = br.base + br.v * s * br.tau
+        self.t = t
+        self._p, self._q = float(x[U] + base), float(x[W] + base)
+        self._dp, self._dq = float(x[DU] + br.v), float(x[DW] + br.v)
+        self._y = base
+        br.s = s
+
+    def _open_bracket(self) -> "_Bracket":
+        """A new bracket from the present state, with every event on it located."""
+        side, y, v = self._side, self._y, self._v
+        phase = self._free if side == FREE else self._contact[side]
+        x = np.array([self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0])
+        c = phase.coefficients(x, phase.h)
+        br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v)
+        d2 = self.params.d / 2
+        if side == FREE:
+            r = c[:, W] - c[:, U]
+            terminal = ((RIGHT, r - _const(d2)), (LEFT, -r - _const(d2)))
+            direction = +1
+        else:
+            br.delta = side * (c[:, W] - c[:, U]) - _const(d2)
+            terminal = ((FREE, br.delta),)
+            direction = -1
+        for key, g in terminal:
+            if abs(g[0]) <= self._zero:
+                # At a switch the function that fired is zero to rounding: its sign just after
+                # the start is that of its first non-zero derivative.
+                g = g.copy()
+                g[0] = 0.0
+                if _start_sign(g) == direction:
+                    br.s_switch, br.switch_to = 0.0, key
+                    return br
+            roots = crossings(g, direction)
+            if roots and roots[0] < br.s_switch:
+                br.s_switch, br.switch_to = roots[0], key
+        # Non-terminal events before the switch: maxima of p, peaks of the deflection.
+        dp = c[:, DU].copy()
+        dp[0] += v
+        events = [(s, _MAXIMUM) for s in crossings(dp, -1) if s <= br.s_switch]
+        if side != FREE:
+            events += [(s, _PEAK) for s in crossings(side * (c[:, DW] - c[:, DU]), -1) if s <= br.s_switch]
+        br.events = sorted(events)
+        return br
+
+    def _non_terminal_event(self, br: "_Bracket", s: float, kind: int) -> None:
+        if kind == _MAXIMUM:
+            p = float(evaluate(br.c[:, U], s)) + br.base + br.v * s * br.tau
+            self._record_maximum(br.t_start + s * br.tau, p)
+        else:
+            self._open.max_deflection = max(self._open.max_deflection, float(evaluate(br.delta, s)))
+
+    def _integrate_ledger(self, br: "_Bracket", s_to: float) -> None:
+        """Add the dissipation and base work of the bracket from ``br.s`` to ``s_to``."""
+        s_from = br.s
+        if s_to <= s_from:
+            return
+        p, a, c, tau = self.params, self._accounts, br.c, br.tau
+        a.dissipated_C += p.C * tau * (integral_of_square(c[:, DU], s_to) - integral_of_square(c[:, DU], s_from))
+        if self._side != FREE:
+            ddelta = c[:, DW] - c[:, DU]
+            a.dissipated_Ceq += p.C_eq * tau * (integral_of_square(ddelta, s_to) - integral_of_square(ddelta, s_from))
+        if br.v != 0.0:
+            # Power the base feeds in: minus the force the device exerts on it, times v.
+            force = p.K * c[:, U] + p.C * c[:, DU]
+            a.work_base -= br.v * tau * (integral(force, s_to) - integral(force, s_from))
+
+    def _record_maximum(self, t: float, p: float) -> None:
+        self._maxima.append((t, p))
+        self._acc.maximum(t, p)
+
+    def _switch(self, to: int) -> None:
+        """Apply the momentum-exact switch rules of MODEL.md section 3 at the present time."""
+        M_eq = self.barrier.M_eq
+        dp, dq = self._dp, self._dq
+        if to != FREE:
+            m = self.params.m
+            dq_after = (m * dq + M_eq * dp) / (m + M_eq)
+            loss = 0.5 * m * M_eq / (m + M_eq) * (dq - dp) ** 2
+            self._open = Impact(time=self.t, side=to, rel_velocity=dq - dp, dp_before=dp, dq_before=dq,
+                                dp_after=dp, dq_after=dq_after, capture_loss=loss)
+            self._acc.impact_started()
+            self._dq = dq_after
+        else:
+            M = self.params.M
+            dp_after = (self._M_contact * dp + M_eq * dq) / M
+            loss = 0.5 * self._M_contact * M_eq / M * (dp - dq) ** 2
+            impact = self._open
+            impact.duration = self.t - impact.time
+            impact.voltage = self.barrier.k_V * impact.max_deflection
+            impact.dp_sep_before, impact.dq_sep_before = dp, dq
+            impact.dp_sep_after, impact.dq_sep_after = dp_after, dq
+            impact.release_loss = loss
+            self._impacts.append(impact)
+            self._open = None
+            self._acc.impact_ended(impact.voltage)
+            self._dp = dp_after
+            if dp > 0.0 >= dp_after:
+                # p' jumps from rising to falling: a (corner) maximum of p.
+                self._record_maximum(self.t, self._p)
+        self._accounts.plastic += loss
+        self._side = to
+
+    # ------------------------------------------------------------------ saving state
+    def snapshot(self) -> dict:
+        """The full internal state as a JSON-safe dict (floats, ints, lists)."""
+        return {
+            "t": self.t, "p": self._p, "dp": self._dp, "q": self._q, "dq": self._dq,
+            "side": self._side, "y": self._y, "v": self._v,
+            "accounts": asdict(self._accounts), "metrics": self._acc.to_dict(),
+            "open": asdict(self._open) if self._open else None,
+            "impacts": [asdict(i) for i in self._impacts],
+            "maxima": [list(m) for m in self._maxima],
+            "bracket": self._bracket.to_dict() if self._bracket else None,
+        }
+
+    @classmethod
+    def restore(cls, params: Parameters, snapshot: dict, log_limit: int | None = None) -> "Simulator":
+        """A simulator of ``params`` in the state saved by :meth:`snapshot`."""
+        sim = cls(params, log_limit=log_limit)
+        sim.t = float(snapshot["t"])
+        sim._p, sim._dp, sim._q, sim._dq = (float(snapshot[k]) for k in ("p", "dp", "q", "dq"))
+        sim._side = int(snapshot["side"])
+        sim._y, sim._v = float(snapshot["y"]), float(snapshot["v"])
+        sim._accounts = _Accounts(**snapshot["accounts"])
+        sim._acc = MetricAccumulators.from_dict(snapshot["metrics"])
+        sim._open = Impact(**snapshot["open"]) if snapshot["open"] else None
+        sim._impacts.extend(Impact(**i) for i in snapshot["impacts"])
+        sim._maxima.extend(tuple(m) for m in snapshot["maxima"])
+        sim._bracket = _Bracket.from_dict(snapshot["bracket"]) if snapshot["bracket"] else None
+        return sim
+
+
+def _const(value: float) -> np.ndarray:
+    """Power coefficients of a constant."""
+    a = np.zeros(ORDER + 1)
+    a[0] = value
+    return a
+
+
+def _start_sign(g: np.ndarray) -> int:
+    """Sign of a polynomial just after s = 0 (its first non-zero coefficient)."""
+    nonzero = np.nonzero(g)[0]
+    return int(np.sign(g[nonzero[0]])) if nonzero.size else 0
+
+
+def _check_finite(**values: float) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f"{name} = {value!r} is not finite; allowed range (-inf, inf)")
+
+
+def _free_matrix(M: float, K: float, C: float) -> np.ndarray:
+    """Free flight on x = (u, w, u', w', 1): M u'' + C u' + K u = 0, w'' = 0."""
+    A = np.zeros((5, 5))
+    A[U, DU] = A[W, DW] = 1.0
+    A[DU, U] = -K / M
+    A[DU, DU] = -C / M
+    return A
+
+
+def _contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: float, d: float, side: int) -> np.ndarray:
+    """Contact with the barrier on ``side`` (MODEL.md section 3) on x = (u, w, u', w', 1).
+
+    ``s F = K_eq (w - u) + C_eq (w' - u') - s K_eq d/2`` acts on the main body (mass ``M1``)
+    and its opposite on the impact body (mass ``m1``).
+    """
+    force = np.zeros(5)
+    force[[U, W, DU, DW]] = [-K_eq, K_eq, -C_eq, C_eq]
+    force[ONE] = -side * K_eq * d / 2
+    A = np.zeros((5, 5))
+    A[U, DU] = A[W, DW] = 1.0
+    A[DU] = force / M1
+    A[DU, U] -= K / M1
+    A[DU, DU] -= C / M1
+    A[DW] = -force / m1
+    return A
