@@ -49,11 +49,16 @@ def mode_slope(x, L: float):
     return C1 * b * (np.sinh(bx) + np.sin(bx) - k * (np.cosh(bx) - np.cos(bx)))
 
 
+@lru_cache(maxsize=1)
+def _gauss_legendre() -> tuple[np.ndarray, np.ndarray]:
+    return np.polynomial.legendre.leggauss(40)
+
+
 def integral_phi_squared(a: float, b: float, L: float) -> float:
     """``int_a^b phi_1(x)^2 dx`` in m, by 40-point Gauss-Legendre (exact to rounding here)."""
     if b <= a:
         return 0.0
-    nodes, weights = np.polynomial.legendre.leggauss(40)
+    nodes, weights = _gauss_legendre()
     x = 0.5 * (b - a) * nodes + 0.5 * (b + a)
     return float(0.5 * (b - a) * np.dot(weights, mode_shape(x, L) ** 2))
 

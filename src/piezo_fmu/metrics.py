@@ -97,7 +97,9 @@ class MetricAccumulators:
         )
 
     def to_dict(self) -> dict:
-        return {name: getattr(self, name) for name in self.FIELDS}
+        data = {name: getattr(self, name) for name in self.FIELDS}
+        data["first_maxima"] = [list(m) for m in self.first_maxima]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "MetricAccumulators":

@@ -115,7 +115,8 @@ class Parameters:
             raise ValueError(
                 f"x1 = {self.x1!r} m puts the patch past the beam end: x1 + L_p must be <= L, "
                 f"so the allowed range of x1 is [0, {self.L - self.L_p:g}] m")
-        if abs(self.q0 - self.p0) > self.d / 2:
+        # A start on a barrier (|q0 - p0| = d/2, to rounding) is allowed.
+        if abs(self.q0 - self.p0) - self.d / 2 > 1e-12 * self.d:
             raise ValueError(
                 f"q0 = {self.q0!r} m starts the impact mass outside the gap: |q0 - p0| must be <= d/2, "
                 f"so the allowed range of q0 is [{self.p0 - self.d / 2:g}, {self.p0 + self.d / 2:g}] m")

@@ -10,7 +10,7 @@ On a bracket of length ``tau <= THETA / rho(A)`` (``rho`` the spectral radius), 
 matrix exponential is summed to ``ORDER`` terms, which is exact to rounding: the first omitted
 term is below ``THETA**(ORDER+1) / (ORDER+1)! ~ 2e-20`` of the state. Each bracket is thus a
 polynomial of degree ``ORDER`` in the normalised time ``s in [0, 1]``, which makes event
-location (``roots.py``) and the energy integrals of the ledger exact polynomial operations.
+location (``roots.py``) and the energy integrals of the ledger (primitives of polynomials) exact.
 """
 
 from __future__ import annotations
@@ -20,15 +20,14 @@ import math
 import numpy as np
 
 #: Terms kept of the exponential series on one bracket.
-ORDER = 16
+ORDER = 28
 #: Bracket length times the spectral radius of ``A``: each mode turns by at most THETA radians.
-THETA = 0.5
+THETA = 2.0
 
 _K = np.arange(ORDER + 1)
-#: ``HILBERT[j, k] = 1 / (j + k + 1)``: ``int_0^1 s^j s^k ds``, for quadratic integrals.
-HILBERT = 1.0 / (_K[:, None] + _K[None, :] + 1.0)
-#: ``1 / (k + 1)``: ``int_0^1 s^k ds``.
-INTEGRAL = 1.0 / (_K + 1.0)
+#: Coefficients of the primitive of a squared bracket polynomial (degree 2 ORDER + 1).
+PRIMITIVE_TERMS = 2 * ORDER + 2
+_LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
 
 
 class LinearPhase:
@@ -68,12 +67,20 @@ def evaluate(c: np.ndarray, s: float) -> np.ndarray:
     return powers(s) @ c
 
 
-def integral(a: np.ndarray, s_end: float) -> float:
-    """``int_0^s_end a(s) ds`` for power coefficients ``a``."""
-    return float(s_end * np.dot(a * powers(s_end), INTEGRAL))
+def primitive(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
+    """Coefficients (``PRIMITIVE_TERMS`` of them) of ``weight * int_0^s a``."""
+    out = np.zeros(PRIMITIVE_TERMS)
+    out[1:ORDER + 2] = weight * a / (_K + 1.0)
+    return out
 
 
-def integral_of_square(a: np.ndarray, s_end: float) -> float:
-    """``int_0^s_end a(s)^2 ds`` for power coefficients ``a``, exact."""
-    b = a * powers(s_end)
-    return float(s_end * (b @ HILBERT @ b))
+def primitive_of_square(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
+    """Coefficients of ``weight * int_0^s a^2``, exact."""
+    out = np.zeros(PRIMITIVE_TERMS)
+    out[1:] = weight * np.convolve(a, a) / _LONG[1:]
+    return out
+
+
+def evaluate_primitive(P: np.ndarray, s: float) -> np.ndarray:
+    """Value at ``s`` of primitives (columns of ``P``, from :func:`primitive`)."""
+    return (s ** _LONG) @ P

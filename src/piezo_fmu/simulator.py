@@ -19,8 +19,8 @@ import numpy as np
 from .barrier import derive_barrier
 from .metrics import MetricAccumulators, Metrics
 from .parameters import Parameters
-from .propagation import ORDER, LinearPhase, evaluate, integral, integral_of_square
-from .roots import crossings
+from .propagation import PRIMITIVE_TERMS, LinearPhase, evaluate, evaluate_primitive, primitive, primitive_of_square
+from .roots import bernstein, crossings
 
 FREE = 0
 RIGHT = +1
@@ -128,6 +128,7 @@ class _Bracket:
     (normalised time ``s`` in [0, 1]); ``base`` (m) and ``v`` (m/s) are the base there. The
     phase switches at ``s_switch`` (inf: not in this bracket) to side ``switch_to``; ``events``
     are the non-terminal events ``(s, kind)`` still ahead; ``s`` is where the state stands.
+    ``ledger`` holds the primitives of the ledger's rates over the bracket.
     """
 
     c: np.ndarray
@@ -140,19 +141,22 @@ class _Bracket:
     switch_to: int = FREE
     events: list = field(default_factory=list)
     delta: np.ndarray | None = None
+    ledger: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         data = asdict(self)
-        data["c"] = self.c.tolist()
-        data["delta"] = None if self.delta is None else self.delta.tolist()
+        for name in ("c", "delta", "ledger"):
+            value = getattr(self, name)
+            data[name] = None if value is None else value.tolist()
         data["events"] = [list(e) for e in self.events]
         return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "_Bracket":
         data = dict(data)
-        data["c"] = np.array(data["c"], dtype=float)
-        data["delta"] = None if data["delta"] is None else np.array(data["delta"], dtype=float)
+        for name in ("c", "delta", "ledger"):
+            if data[name] is not None:
+                data[name] = np.array(data[name], dtype=float)
         data["events"] = [(float(s), int(k)) for s, k in data["events"]]
         return cls(**data)
 
@@ -195,18 +199,22 @@ class Simulator:
         self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side))
                          for side in (RIGHT, LEFT)}
         self._zero = _ZERO * params.d
+        self._functionals = {side: _event_functionals(side, params.d) for side in (FREE, RIGHT, LEFT)}
 
         self.t = float(t0)
         self._p, self._dp, self._q, self._dq = params.p0, params.dp0, params.q0, params.dq0
         self._side = FREE
         self._y, self._v = float(y0), float(v0)
+        self._bracket: _Bracket | None = None
         self._accounts = _Accounts()
         self._accounts.initial = self.energy.total
         self._acc = MetricAccumulators()
+        self._metrics: Metrics | None = None
         self._open: Impact | None = None
         self._impacts: deque[Impact] = deque(maxlen=log_limit)
         self._maxima: deque[tuple[float, float]] = deque(maxlen=log_limit)
-        self._bracket: _Bracket | None = None
+        #: Brackets opened so far: the unit of work of the integrator.
+        self.brackets_opened = 0
 
     # ------------------------------------------------------------------ reading
     @property
@@ -244,7 +252,10 @@ class Simulator:
 
     @property
     def metrics(self) -> Metrics:
-        return self._acc.metrics(self.params.R_load)
+        # Metrics change only at events; a host reads them every step.
+        if self._metrics is None:
+            self._metrics = self._acc.metrics(self.params.R_load)
+        return self._metrics
 
     @property
     def energy(self) -> EnergyLedger:
@@ -257,10 +268,12 @@ class Simulator:
             delta = self._side * (self._q - self._p) - p.d / 2
             potential_Keq = 0.5 * self.barrier.K_eq * delta**2
         a = self._accounts
+        br = self._bracket
+        open_C, open_Ceq, open_base = evaluate_primitive(br.ledger, br.s) if br else (0.0, 0.0, 0.0)
         return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
-                            potential_Keq=potential_Keq, dissipated_C=a.dissipated_C,
-                            dissipated_Ceq=a.dissipated_Ceq, plastic=a.plastic,
-                            work_base=a.work_base, initial=a.initial)
+                            potential_Keq=potential_Keq, dissipated_C=a.dissipated_C + open_C,
+                            dissipated_Ceq=a.dissipated_Ceq + open_Ceq, plastic=a.plastic,
+                            work_base=a.work_base + open_base, initial=a.initial)
 
     @property
     def bracket_lengths(self) -> dict[str, float]:
@@ -280,32 +293,32 @@ class Simulator:
         if not t_end > self.t:
             raise ValueError(f"t_end = {t_end!r} s must be after the present time t = {self.t!r} s")
         if y != self._y or v != self._v:
+            self._close_bracket()
             if y != self._y:
                 # The host moved the base end of the spring: that work enters the ledger.
                 self._accounts.work_base += 0.5 * self.params.K * ((self._p - y) ** 2 - (self._p - self._y) ** 2)
             self._y, self._v = float(y), float(v)
-            self._bracket = None
         instant_switches = 0
         while True:
             if self._bracket is None:
                 self._bracket = self._open_bracket()
+                self.brackets_opened += 1
             br = self._bracket
             s_stop = min(1.0, (t_end - br.t_start) / br.tau)
             s_to = min(s_stop, br.s_switch)
             while br.events and br.events[0][0] <= s_to:
                 self._non_terminal_event(br, *br.events.pop(0))
-            self._integrate_ledger(br, s_to)
             if br.s_switch <= s_stop:
                 self._move_to(br, br.s_switch, br.t_start + br.s_switch * br.tau)
                 instant_switches = instant_switches + 1 if br.s_switch == 0.0 else 0
                 if instant_switches > MAX_SWITCHES_AT_ONE_INSTANT:
                     raise RuntimeError(f"{instant_switches} phase switches at t = {self.t!r} s without progress")
+                self._close_bracket()
                 self._switch(br.switch_to)
-                self._bracket = None
                 continue
             if s_stop == 1.0:
                 self._move_to(br, 1.0, br.t_start + br.tau)
-                self._bracket = None
+                self._close_bracket()
                 if self.t < t_end:
                     continue
             else:
@@ -329,36 +342,52 @@ class Simulator:
         phase = self._free if side == FREE else self._contact[side]
         x = np.array([self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0])
         c = phase.coefficients(x, phase.h)
-        br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v)
-        d2 = self.params.d / 2
-        if side == FREE:
-            r = c[:, W] - c[:, U]
-            terminal = ((RIGHT, r - _const(d2)), (LEFT, -r - _const(d2)))
-            direction = +1
-        else:
-            br.delta = side * (c[:, W] - c[:, U]) - _const(d2)
-            terminal = ((FREE, br.delta),)
-            direction = -1
-        for key, g in terminal:
+        br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
+        # Event functions as linear maps of the state: columns of G, Bernstein rows of B.
+        functionals = self._functionals[side]
+        functionals[ONE, 2] = v  # p' = u' + v
+        G = c @ functionals
+        B = bernstein(G.T)
+        n_terminal = 2 if side == FREE else 1
+        direction = +1 if side == FREE else -1
+        targets = (RIGHT, LEFT) if side == FREE else (FREE,)
+        for j in range(n_terminal):
+            g, b = G[:, j], B[j]
             if abs(g[0]) <= self._zero:
                 # At a switch the function that fired is zero to rounding: its sign just after
                 # the start is that of its first non-zero derivative.
                 g = g.copy()
                 g[0] = 0.0
                 if _start_sign(g) == direction:
-                    br.s_switch, br.switch_to = 0.0, key
+                    br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
-            roots = crossings(g, direction)
+                b = bernstein(g)
+            roots = crossings(g, direction, b)
             if roots and roots[0] < br.s_switch:
-                br.s_switch, br.switch_to = roots[0], key
-        # Non-terminal events before the switch: maxima of p, peaks of the deflection.
-        dp = c[:, DU].copy()
-        dp[0] += v
-        events = [(s, _MAXIMUM) for s in crossings(dp, -1) if s <= br.s_switch]
+                br.s_switch, br.switch_to = roots[0], targets[j]
+        # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
+        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2]) if s <= br.s_switch]
         if side != FREE:
-            events += [(s, _PEAK) for s in crossings(side * (c[:, DW] - c[:, DU]), -1) if s <= br.s_switch]
-        br.events = sorted(events)
+            br.delta = G[:, 0]
+            events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1]) if s <= br.s_switch]
+            events.sort()
+        br.events = events
         return br
+
+    def _ledger_integrands(self, c: np.ndarray, tau: float, side: int, v: float) -> np.ndarray:
+        """Primitives, in normalised time, of the ledger's rates on a bracket (J).
+
+        Columns: dissipation in ``C`` (``C u'^2``), in ``C_eq`` (``C_eq delta'^2``), and the work
+        of the base (``-v (K u + C u')``: minus the force the device exerts on it, times ``v``).
+        """
+        p = self.params
+        P = np.zeros((PRIMITIVE_TERMS, 3))
+        P[:, 0] = primitive_of_square(c[:, DU], p.C * tau)
+        if side != FREE:
+            P[:, 1] = primitive_of_square(c[:, DW] - c[:, DU], p.C_eq * tau)
+        if v != 0.0:
+            P[:, 2] = primitive(p.K * c[:, U] + p.C * c[:, DU], -v * tau)
+        return P
 
     def _non_terminal_event(self, br: "_Bracket", s: float, kind: int) -> None:
         if kind == _MAXIMUM:
@@ -367,27 +396,31 @@ class Simulator:
         else:
             self._open.max_deflection = max(self._open.max_deflection, float(evaluate(br.delta, s)))
 
-    def _integrate_ledger(self, br: "_Bracket", s_to: float) -> None:
-        """Add the dissipation and base work of the bracket from ``br.s`` to ``s_to``."""
-        s_from = br.s
-        if s_to <= s_from:
+    def _close_bracket(self) -> None:
+        """Book the ledger of the present bracket up to where the state stands, and drop it.
+
+        The ledger of an open bracket is read from its primitives at the present position, and
+        booked only when the bracket closes; so the ledger, like the state, does not depend on
+        how the calls chopped the bracket.
+        """
+        br = self._bracket
+        if br is None:
             return
-        p, a, c, tau = self.params, self._accounts, br.c, br.tau
-        a.dissipated_C += p.C * tau * (integral_of_square(c[:, DU], s_to) - integral_of_square(c[:, DU], s_from))
-        if self._side != FREE:
-            ddelta = c[:, DW] - c[:, DU]
-            a.dissipated_Ceq += p.C_eq * tau * (integral_of_square(ddelta, s_to) - integral_of_square(ddelta, s_from))
-        if br.v != 0.0:
-            # Power the base feeds in: minus the force the device exerts on it, times v.
-            force = p.K * c[:, U] + p.C * c[:, DU]
-            a.work_base -= br.v * tau * (integral(force, s_to) - integral(force, s_from))
+        dissipated_C, dissipated_Ceq, work_base = evaluate_primitive(br.ledger, br.s)
+        a = self._accounts
+        a.dissipated_C += dissipated_C
+        a.dissipated_Ceq += dissipated_Ceq
+        a.work_base += work_base
+        self._bracket = None
 
     def _record_maximum(self, t: float, p: float) -> None:
+        self._metrics = None
         self._maxima.append((t, p))
         self._acc.maximum(t, p)
 
     def _switch(self, to: int) -> None:
         """Apply the momentum-exact switch rules of MODEL.md section 3 at the present time."""
+        self._metrics = None
         M_eq = self.barrier.M_eq
         dp, dq = self._dp, self._dq
         if to != FREE:
@@ -448,11 +481,24 @@ class Simulator:
         return sim
 
 
-def _const(value: float) -> np.ndarray:
-    """Power coefficients of a constant."""
-    a = np.zeros(ORDER + 1)
-    a[0] = value
-    return a
+def _event_functionals(side: int, d: float) -> np.ndarray:
+    """Event functions of a phase as columns acting on x = (u, w, u', w', 1).
+
+    Free flight: ``r - d/2``, ``-r - d/2`` (onsets, right and left) and ``p'``; contact on
+    ``side``: ``delta`` (separation), ``delta'`` (its peak) and ``p'``. The base velocity in
+    ``p' = u' + v`` is filled in per bracket.
+    """
+    L = np.zeros((5, 3))
+    if side == FREE:
+        L[[U, W], 0] = [-1.0, 1.0]
+        L[[U, W], 1] = [1.0, -1.0]
+        L[ONE, :2] = -d / 2
+    else:
+        L[[U, W], 0] = [-side, side]
+        L[ONE, 0] = -d / 2
+        L[[DU, DW], 1] = [-side, side]
+    L[DU, 2] = 1.0
+    return L
 
 
 def _start_sign(g: np.ndarray) -> int:
