@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test bench clean
+.PHONY: nominal test fmu fmu-check bench bench-core bench-fmu clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -17,8 +17,20 @@ nominal: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
-bench: $(STAMP)
+# The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
+fmu: $(STAMP)
+	$(BIN)/python -m piezo_fmu.fmu_build
+
+fmu-check: $(STAMP)
+	$(BIN)/python -m piezo_fmu.fmu_build --check
+
+bench: bench-core bench-fmu
+
+bench-core: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
+
+bench-fmu: $(STAMP)
+	$(BIN)/python benchmarks/bench_fmu.py
 
 clean:
 	rm -rf $(VENV) results build

@@ -1,0 +1,292 @@
+"""Build ``fmus/PiezoImpactDamper.fmu`` from :mod:`piezo_fmu.fmu_slave`, reproducibly.
+
+Usage (from the repository root)::
+
+    python -m piezo_fmu.fmu_build            # (re)write fmus/PiezoImpactDamper.fmu
+    python -m piezo_fmu.fmu_build --check    # exit 1 if the committed FMU is stale
+
+pythonfmu 0.7.0 builds the archive; this module then completes and freezes it:
+
+- The modelDescription gets what pythonfmu does not write: ``UnitDefinitions`` (SI base-unit
+  exponents), a ``unit`` on every Real, ``min``/``max`` where the table bounds a variable,
+  start values written with full (round-trip) precision, and ``ModelStructure/InitialUnknowns``.
+  Its random GUID and its generation time are replaced.
+- The GUID is derived from the content: the SHA-256 of every other file of the archive (name and
+  bytes) and of the modelDescription written with an empty GUID.
+- The archive is written with sorted entries, a fixed timestamp and fixed permissions, stored
+  uncompressed (so the bytes do not depend on the zlib build), without ``__pycache__``. A rebuild
+  from the same sources is byte-identical, which is what ``--check`` relies on.
+
+The FMU carries the core (the ``piezo_fmu`` package, less this build script and the slave) and
+the slave as the top-level module ``piezo_fmu_slave`` in ``resources/``. At run time it needs
+only a Python 3 host with numpy and scipy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import io
+import shutil
+import sys
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+from typing import Iterable, Optional
+
+from pythonfmu import FmuBuilder
+
+from piezo_fmu.fmu_slave import VARIABLES, Variable
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+SLAVE_SOURCE = PACKAGE_DIR / "fmu_slave.py"
+#: Module name of the slave inside the FMU: unique, so that it cannot clash in ``sys.modules``
+#: with another pythonfmu FMU loaded into the same host process.
+SLAVE_MODULE = "piezo_fmu_slave"
+MODEL_IDENTIFIER = "PiezoImpactDamper"
+DEFAULT_DEST = Path("fmus") / f"{MODEL_IDENTIFIER}.fmu"
+#: Files of the package that the FMU does not need at run time (the slave travels as SLAVE_MODULE).
+NOT_BUNDLED = frozenset({"fmu_build.py", "fmu_slave.py"})
+
+#: CoSimulation capability flags (pythonfmu defaults otherwise).
+CAPABILITIES = {
+    "canHandleVariableCommunicationStepSize": True,
+    "canGetAndSetFMUstate": True,
+    "canSerializeFMUstate": True,
+}
+
+#: SI base-unit exponents of every unit the table uses (FMI 2.0 ``BaseUnit`` attributes).
+BASE_UNITS = {
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "kg": {"kg": 1},
+    "kg/m3": {"kg": 1, "m": -3},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N/m": {"kg": 1, "s": -2},
+    "N.s/m": {"kg": 1, "s": -1},
+    "Pa": {"kg": 1, "m": -1, "s": -2},
+    "J": {"kg": 1, "m": 2, "s": -2},
+    "W": {"kg": 1, "m": 2, "s": -3},
+    "V": {"kg": 1, "m": 2, "s": -3, "A": -1},
+    "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2},
+    "V.m/N": {"m": 2, "s": -1, "A": -1},
+}
+
+#: Fixed archive metadata (the earliest date a zip can hold; regular file, rw-r--r--).
+ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
+ZIP_FILE_MODE = 0o100644
+
+
+# -- staging and the pythonfmu build ---------------------------------------------------------------
+
+def stage_sources(workdir: Path) -> tuple[Path, list[Path]]:
+    """Copy the slave (as SLAVE_MODULE) and the core package's Python files into ``workdir``.
+
+    Returns the slave script and the project files to bundle beside it.
+    """
+    script = workdir / f"{SLAVE_MODULE}.py"
+    shutil.copyfile(SLAVE_SOURCE, script)
+    package = workdir / "piezo_fmu"
+    for source in sorted(PACKAGE_DIR.rglob("*.py")):
+        relative = source.relative_to(PACKAGE_DIR)
+        if "__pycache__" in relative.parts or relative.as_posix() in NOT_BUNDLED:
+            continue
+        target = package / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+    return script, [package]
+
+
+def run_pythonfmu(script: Path, project_files: Iterable[Path], outdir: Path) -> Path:
+    """Build a raw FMU with pythonfmu, leaving the build process's imports as they were."""
+    saved_path, saved_modules = list(sys.path), set(sys.modules)
+    try:
+        return FmuBuilder.build_FMU(script, dest=outdir, project_files=list(project_files),
+                                    **CAPABILITIES)
+    finally:
+        sys.path[:] = saved_path
+        for name in {script.stem, SLAVE_MODULE} - saved_modules:
+            sys.modules.pop(name, None)  # staged copies must not shadow the ones inside an FMU
+
+
+# -- completing the modelDescription ---------------------------------------------------------------
+
+def _number(value: float, kind: str) -> str:
+    return str(int(value)) if kind == "Integer" else repr(float(value))
+
+
+def complete_model_description(xml: bytes, variables: Iterable[Variable]) -> ET.Element:
+    """The modelDescription with units, bounds, exact starts and InitialUnknowns (GUID left empty)."""
+    root = ET.fromstring(xml)
+    by_name = {spec.name: spec for spec in variables}
+
+    root.attrib.pop("generationDateAndTime", None)  # a timestamp would break reproducibility
+    root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmu_build")
+    root.set("guid", "")
+    cosim = root.find("CoSimulation")
+    for flag, value in CAPABILITIES.items():
+        cosim.set(flag, str(value).lower())
+
+    scalars = root.find("ModelVariables").findall("ScalarVariable")
+    names = [scalar.get("name") for scalar in scalars]
+    if sorted(names) != sorted(by_name):
+        raise ValueError(f"the slave's variables {names} do not match the table {sorted(by_name)}")
+
+    used_units = set()
+    for scalar in scalars:
+        spec = by_name[scalar.get("name")]
+        typed = scalar[0]
+        attrib = {}
+        if spec.unit is not None:
+            attrib["unit"] = spec.unit
+            used_units.add(spec.unit)
+        if spec.min is not None:
+            attrib["min"] = _number(spec.min, spec.type)
+        if spec.max is not None:
+            attrib["max"] = _number(spec.max, spec.type)
+        if spec.start is not None:
+            attrib["start"] = _number(spec.start, spec.type)
+        typed.attrib.clear()
+        typed.attrib.update(attrib)
+
+    unknown = set(used_units) - set(BASE_UNITS)
+    if unknown:
+        raise ValueError(f"no SI base-unit exponents known for the units {sorted(unknown)}; add them to BASE_UNITS")
+    unit_definitions = ET.Element("UnitDefinitions")
+    for name in sorted(used_units):
+        unit = ET.SubElement(unit_definitions, "Unit", {"name": name})
+        ET.SubElement(unit, "BaseUnit", {key: str(value) for key, value in BASE_UNITS[name].items()})
+    root.insert(list(root).index(cosim) + 1, unit_definitions)
+
+    structure = root.find("ModelStructure")
+    for output in structure.find("Outputs"):
+        # Co-simulation outputs are the state at the end of the step just taken; the inputs set
+        # at a communication point act on the next step only: no direct feedthrough.
+        output.set("dependencies", "")
+    for old in structure.findall("InitialUnknowns"):
+        structure.remove(old)
+    initial_unknowns = ET.SubElement(structure, "InitialUnknowns")
+    for index, scalar in enumerate(scalars, start=1):
+        if scalar.get("causality") == "output":
+            ET.SubElement(initial_unknowns, "Unknown", {"index": str(index)})
+    return root
+
+
+def _xml_bytes(root: ET.Element) -> bytes:
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def content_guid(files: dict[str, bytes], root: ET.Element) -> str:
+    """GUID from the content: SHA-256 of the other files and of the modelDescription sans GUID."""
+    digest = hashlib.sha256()
+    for name in sorted(files):
+        if name != "modelDescription.xml":
+            digest.update(name.encode() + b"\0" + len(files[name]).to_bytes(8, "big") + files[name])
+    root.set("guid", "")
+    digest.update(b"modelDescription.xml\0" + _xml_bytes(root))
+    return "{" + str(uuid.UUID(bytes=digest.digest()[:16])) + "}"
+
+
+# -- the reproducible archive ---------------------------------------------------------------------
+
+def deterministic_zip(files: dict[str, bytes]) -> bytes:
+    """The archive of ``files``: sorted, fixed timestamp and mode, stored uncompressed."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
+        for name in sorted(files):
+            info = zipfile.ZipInfo(name, date_time=ZIP_DATE_TIME)
+            info.compress_type = zipfile.ZIP_STORED
+            info.create_system = 3  # Unix, so that external_attr means a file mode everywhere
+            info.external_attr = ZIP_FILE_MODE << 16
+            archive.writestr(info, files[name])
+    return buffer.getvalue()
+
+
+def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
+    """The reproducible FMU bytes made from a raw pythonfmu build."""
+    with zipfile.ZipFile(raw_fmu) as archive:
+        files = {name: archive.read(name) for name in archive.namelist()
+                 if not name.endswith("/") and "__pycache__" not in name and not name.endswith(".pyc")}
+    root = complete_model_description(files["modelDescription.xml"], variables)
+    guid = content_guid(files, root)
+    root.set("guid", guid)
+    files["modelDescription.xml"] = _xml_bytes(root)
+    return deterministic_zip(files)
+
+
+def build_bytes(script: Optional[Path] = None) -> bytes:
+    """Build the FMU in a scratch directory and return its bytes.
+
+    ``script`` defaults to the piezo slave. Another slave script (the benchmark's no-work slave)
+    gets the same bundle, with the piezo slave beside it as a module it can import its table from.
+    """
+    with tempfile.TemporaryDirectory(prefix="piezo_fmu_build_") as scratch:
+        scratch = Path(scratch)
+        stage, out = scratch / "stage", scratch / "out"
+        stage.mkdir()
+        out.mkdir()
+        slave, project_files = stage_sources(stage)
+        if script is not None:
+            project_files.append(slave)
+            slave = stage / Path(script).name
+            shutil.copyfile(script, slave)
+        return freeze(run_pythonfmu(slave, project_files, out))
+
+
+def build(dest: Path = DEFAULT_DEST) -> Path:
+    """Write the FMU to ``dest`` (only if its bytes change) and return the path."""
+    data = build_bytes()
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    if not dest.is_file() or dest.read_bytes() != data:
+        dest.write_bytes(data)
+    return dest
+
+
+def differences(old: bytes, new: bytes) -> list[str]:
+    """Entries that differ between two FMU archives, for a readable staleness report."""
+    def entries(data: bytes) -> dict[str, bytes]:
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            return {name: archive.read(name) for name in archive.namelist()}
+    a, b = entries(old), entries(new)
+    return sorted(name for name in set(a) | set(b) if a.get(name) != b.get(name))
+
+
+def check(dest: Path = DEFAULT_DEST) -> list[str]:
+    """Problems that make the committed FMU stale (empty when it is up to date)."""
+    dest = Path(dest)
+    if not dest.is_file():
+        return [f"{dest} does not exist"]
+    old, new = dest.read_bytes(), build_bytes()
+    if old == new:
+        return []
+    try:
+        changed = differences(old, new)
+    except zipfile.BadZipFile:
+        return [f"{dest} is not a zip archive"]
+    return [f"{dest} differs from a rebuild in: {', '.join(changed) or 'archive layout'}"]
+
+
+def main(argv: Optional[list[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m piezo_fmu.fmu_build", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--dest", type=Path, default=DEFAULT_DEST, help=f"FMU path (default {DEFAULT_DEST})")
+    parser.add_argument("--check", action="store_true",
+                        help="do not write; exit 1 if the FMU at --dest differs from a rebuild")
+    args = parser.parse_args(argv)
+    if args.check:
+        problems = check(args.dest)
+        for problem in problems:
+            print(f"stale FMU: {problem}; rebuild it with `make fmu` and commit it", file=sys.stderr)
+        if not problems:
+            print(f"{args.dest} is up to date")
+        return 1 if problems else 0
+    path = build(args.dest)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,301 @@
+"""The FMI 2.0 co-simulation slave of the piezo-impact damper: a table of variables.
+
+Each variable forwards to the simulation core (:class:`piezo_fmu.Simulator`); there is no
+physics here. The FMI side lives here and in :mod:`piezo_fmu.fmu_build`, which turns this
+script into ``fmus/PiezoImpactDamper.fmu`` (``python -m piezo_fmu.fmu_build``) and completes the
+modelDescription with the units, bounds and structure this table declares.
+
+Inside the FMU this file is the top-level module ``piezo_fmu_slave`` and imports the core from
+the ``piezo_fmu`` package bundled beside it in ``resources/``. Imports are absolute for that
+reason. The module holds no mutable state: every instance keeps its own.
+
+Errors never escape as exceptions (pythonfmu turns those into ``fmi2Fatal`` and the instance is
+lost). A bad parameter, a non-finite input, a non-positive step or a step that does not start at
+the current time is logged with ``fmi2Error`` and the step returns ``fmi2Discard``; the instance
+stays usable (set finite inputs and step again, or reset it).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Callable, NamedTuple, Optional
+
+from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.enums import Fmi2Initial, Fmi2Status
+
+from piezo_fmu import Parameters, Simulator, parameter_info
+
+class Variable(NamedTuple):
+    """One FMU variable: what the modelDescription says of it and how to read it from the core.
+
+    ``unit``, ``min`` and ``max`` are written by :mod:`piezo_fmu.fmu_build` (pythonfmu 0.7.0
+    writes none of them). ``read`` maps a :class:`CoreView` of the core to the output value.
+    """
+
+    name: str
+    type: str  # "Real" or "Integer"
+    causality: str  # "parameter", "input" or "output"
+    unit: Optional[str]  # None for Integer variables: FMI 2.0 gives Integer no unit
+    description: str
+    min: Optional[float] = None
+    max: Optional[float] = None
+    start: Optional[float] = None  # parameters and inputs only
+    read: Optional[Callable] = None  # outputs only
+
+
+def _zero_until_defined(value: float) -> float:
+    """The core reports a not-yet-defined metric as NaN; the FMU output is 0 until then."""
+    return 0.0 if math.isnan(value) else value
+
+
+def _parameter_variables() -> tuple:
+    """Every core parameter, under its own name, unit, description, bound and default.
+
+    A parameter whose default is an ``int`` (``barrier_mode``) is an FMI Integer, the rest Real.
+    """
+    table = []
+    for name, info in parameter_info().items():
+        bound = info["bound"]
+        is_integer = type(info["default"]) is int
+        table.append(Variable(
+            name=name,
+            type="Integer" if is_integer else "Real",
+            causality="parameter",
+            unit=None if is_integer else info["unit"],
+            description=info["description"],
+            min=bound.lo if math.isfinite(bound.lo) else None,
+            max=bound.hi if math.isfinite(bound.hi) else None,
+            start=info["default"],
+        ))
+    return tuple(table)
+
+
+INPUTS = (
+    Variable("base_displacement", "Real", "input", "m",
+             "Base displacement y at the start of the step; within a step y = y_k + v_k (t - t_k)",
+             start=0.0),
+    Variable("base_velocity", "Real", "input", "m/s",
+             "Base velocity v_b, constant within a step (leave at 0 for a zero-order hold of y)",
+             start=0.0),
+)
+
+OUTPUTS = (
+    Variable("main_displacement", "Real", "output", "m",
+             "Absolute displacement p of the main mass", read=lambda core: core.state.p),
+    Variable("main_velocity", "Real", "output", "m/s",
+             "Absolute velocity dp/dt of the main mass", read=lambda core: core.state.dp),
+    Variable("impactor_displacement", "Real", "output", "m",
+             "Absolute displacement q of the impact mass", read=lambda core: core.state.q),
+    Variable("impactor_velocity", "Real", "output", "m/s",
+             "Absolute velocity dq/dt of the impact mass", read=lambda core: core.state.dq),
+    Variable("deflection_left", "Real", "output", "m",
+             "Tip deflection of the left barrier (r = -d/2); 0 while not in contact",
+             min=0.0, read=lambda core: core.sim.deflection(-1)),
+    Variable("deflection_right", "Real", "output", "m",
+             "Tip deflection of the right barrier (r = +d/2); 0 while not in contact",
+             min=0.0, read=lambda core: core.sim.deflection(+1)),
+    Variable("voltage_left", "Real", "output", "V",
+             "Voltage of the left barrier's piezoelectric patch (quasi-static, eqs. 25-28)",
+             min=0.0, read=lambda core: core.sim.voltage(-1)),
+    Variable("voltage_right", "Real", "output", "V",
+             "Voltage of the right barrier's piezoelectric patch (quasi-static, eqs. 25-28)",
+             min=0.0, read=lambda core: core.sim.voltage(+1)),
+    Variable("base_force", "Real", "output", "N",
+             "Force the device exerts on its base (spring K and damper C of the main mass), along +x",
+             read=lambda core: core.sim.base_force),
+    Variable("impact_count", "Integer", "output", None,
+             "Number of impacts (contact onsets) so far, both barriers", min=0,
+             read=lambda core: core.metrics.impact_count),
+    Variable("last_impact_voltage", "Real", "output", "V",
+             "Peak voltage of the latest completed impact (eq. 28); 0 before the first", min=0.0,
+             read=lambda core: core.metrics.last_impact_voltage),
+    Variable("voltage_rms", "Real", "output", "V",
+             "RMS of the peak voltages of the impacts completed so far (eq. 30)", min=0.0,
+             read=lambda core: core.metrics.V_rms),
+    Variable("average_power", "Real", "output", "W",
+             "Average power V_rms^2 / R_load (eq. 30)", min=0.0,
+             read=lambda core: core.metrics.P_ave),
+    Variable("damping_inclination", "Real", "output", "m/s",
+             "Damping inclination (P1 - P2) / (t2 - t1) from the first two maxima of p (eq. 29); "
+             "0 until two maxima exist",
+             read=lambda core: _zero_until_defined(core.metrics.DI)),
+    Variable("energy_dissipated", "Real", "output", "J",
+             "Energy dissipated since the start (damping, contact, barrier capture and release)",
+             min=0.0, read=lambda core: core.energy.dissipated),
+    Variable("energy_balance_error", "Real", "output", "J",
+             "Energy ledger residual: energy now - (initial energy + work by the base - dissipated); "
+             "0 to rounding",
+             read=lambda core: core.energy.balance_error),
+)
+
+#: The whole table, in value-reference order: parameters, then inputs, then outputs.
+VARIABLES = _parameter_variables() + INPUTS + OUTPUTS
+
+_CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
+              "output": Fmi2Causality.output}
+_VARIABILITY = {("parameter", "Real"): Fmi2Variability.fixed,
+                ("parameter", "Integer"): Fmi2Variability.fixed,
+                ("input", "Real"): Fmi2Variability.continuous,
+                ("output", "Real"): Fmi2Variability.continuous,
+                ("output", "Integer"): Fmi2Variability.discrete}
+
+
+def scalar_variable(spec: Variable, getter: Callable, setter: Optional[Callable] = None):
+    """The pythonfmu variable for one row of the table."""
+    kind = Integer if spec.type == "Integer" else Real
+    initial = Fmi2Initial.exact if spec.causality == "parameter" else None
+    return kind(spec.name, causality=_CAUSALITY[spec.causality],
+                variability=_VARIABILITY[spec.causality, spec.type], initial=initial,
+                description=spec.description, getter=getter, setter=setter)
+
+
+class CoreView:
+    """The core read at one instant, each aggregate built once for all the outputs."""
+
+    __slots__ = ("sim", "state", "metrics", "energy")
+
+    def __init__(self, sim: Simulator):
+        self.sim, self.state, self.metrics, self.energy = sim, sim.state, sim.metrics, sim.energy
+
+
+_READERS = tuple(spec.read for spec in OUTPUTS)
+#: Output values before the core exists (bad start values): NaN, and 0 for the Integer.
+_NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in OUTPUTS)
+
+
+class PiezoImpactDamper(Fmi2Slave):
+    """Piezo-impact damper (Afsharfard and Farshidianfar 2014): main mass, impact mass and two
+    piezoelectric cantilever barriers, driven by base motion; exact event-driven core."""
+
+    author = "piezo-fmu"
+    description = ("Piezo-impact damper (Afsharfard and Farshidianfar 2014) driven by base motion; "
+                   "exact event-driven core. Needs Python 3 with numpy and scipy.")
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=2.0, step_size=1e-4)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._values = {spec.name: spec.start for spec in VARIABLES if spec.causality == "parameter"}
+        self._inputs = {spec.name: spec.start for spec in INPUTS}
+        self._start_time = 0.0
+        self._sim: Optional[Simulator] = None
+        self._stale = True  # start values changed since the core was built
+        self._stepping = False  # past fmi2ExitInitializationMode
+        self._fault: Optional[str] = None  # why every further step must fail
+        self._outputs: Optional[list] = None  # output values at the present instant, once read
+        for spec in VARIABLES:
+            self.register_variable(self._variable(spec), nested=False)
+
+    # -- the table, bound to this instance ------------------------------------------------------
+
+    def _variable(self, spec: Variable):
+        name = spec.name
+        if spec.causality == "parameter":
+            return scalar_variable(spec, lambda: self._values[name],
+                                   lambda value: self._set_parameter(name, value))
+        if spec.causality == "input":
+            return scalar_variable(spec, lambda: self._inputs[name],
+                                   lambda value: self._set_input(name, value))
+        index = OUTPUTS.index(spec)
+        return scalar_variable(spec, lambda: (self._outputs or self._read_outputs())[index])
+
+    def _set_parameter(self, name: str, value) -> None:
+        if self._stepping:
+            if value == self._values[name]:
+                return  # hosts that set every start value again change nothing
+            self._fault = f"parameter {name} is fixed: it cannot be set to {value!r} after initialization"
+            self.log(self._fault, Fmi2Status.error)
+            return
+        self._values[name] = value
+        self._start_values_changed()
+
+    def _set_input(self, name: str, value: float) -> None:
+        self._inputs[name] = value
+        if not self._stepping:
+            self._start_values_changed()  # the inputs at the start time are the core's initial base
+
+    def _start_values_changed(self) -> None:
+        self._stale, self._outputs = True, None
+
+    def _read_outputs(self) -> list:
+        sim = self._core()
+        if sim is None:
+            return list(_NO_OUTPUTS)
+        view = CoreView(sim)
+        self._outputs = [read(view) for read in _READERS]
+        return self._outputs
+
+    # -- FMI life cycle ---------------------------------------------------------------------------
+
+    def _core(self) -> Optional[Simulator]:
+        """The core at the present time; before stepping, rebuilt from the start values set."""
+        if self._stale and not self._stepping:
+            self._stale, self._outputs = False, None
+            self._sim, self._fault = None, self._bad_inputs()
+            if self._fault is not None:
+                return None
+            try:
+                params = Parameters(**self._values)
+                self._sim = Simulator(params, y0=self._inputs["base_displacement"],
+                                      v0=self._inputs["base_velocity"], t0=self._start_time)
+            except Exception as error:  # noqa: BLE001 - reported through FMI, never raised
+                self._fault = f"invalid start values: {error}"
+        return self._sim
+
+    def setup_experiment(self, start_time: float, stop_time=None, tolerance=None):
+        self._start_time = float(start_time)
+        self._start_values_changed()
+
+    def exit_initialization_mode(self):
+        self._core()
+        self._stepping = True
+        if self._fault is not None:
+            self.log(self._fault, Fmi2Status.error)
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        if self._fault is not None:
+            return self._fail(self._fault)
+        sim = self._sim if self._stepping else None
+        if sim is None:
+            return self._fail("do_step is only allowed after fmi2ExitInitializationMode")
+        if not (step_size > 0.0 and math.isfinite(step_size)):
+            return self._fail(f"communication step size = {step_size!r} s must be finite and > 0")
+        t = sim.t
+        if not abs(current_time - t) <= 1e-12 * max(1.0, abs(t)):
+            return self._fail(f"the step starts at t = {current_time!r} s but the FMU is at t = {t!r} s; "
+                              "a step must continue from the end of the previous one")
+        inputs = self._inputs
+        y, v = inputs["base_displacement"], inputs["base_velocity"]
+        if not (math.isfinite(y) and math.isfinite(v)):
+            return self._fail(f"step from t = {current_time!r} s refused: {self._bad_inputs()}")
+        self._outputs = None
+        try:
+            sim.advance(current_time + step_size, y, v)
+        except Exception as error:  # noqa: BLE001 - reported through FMI, never raised
+            return self._fail(f"step from t = {current_time!r} s by {step_size!r} s rejected: {error}")
+        return True
+
+    def _bad_inputs(self) -> Optional[str]:
+        bad = [f"{name} = {value!r}" for name, value in self._inputs.items() if not math.isfinite(value)]
+        return f"input {', '.join(bad)} is not finite" if bad else None
+
+    def _fail(self, message: str) -> bool:
+        self.log(message, Fmi2Status.error)
+        return False
+
+    # -- FMU state: the values set, the flags and the core's full snapshot, JSON-safe -------------
+
+    def _get_fmu_state(self) -> dict:
+        core = self._sim.snapshot() if self._sim is not None and not self._stale else None
+        return copy.deepcopy({"values": self._values, "inputs": self._inputs,
+                              "start_time": self._start_time, "stepping": self._stepping,
+                              "fault": self._fault, "core": core})
+
+    def _set_fmu_state(self, state: dict) -> None:
+        state = copy.deepcopy(state)  # the host may set the same state again later
+        self._values, self._inputs = state["values"], state["inputs"]
+        self._start_time, self._stepping = state["start_time"], state["stepping"]
+        self._fault, self._sim, self._stale, self._outputs = state["fault"], None, True, None
+        if state["core"] is not None:
+            self._sim = Simulator.restore(Parameters(**self._values), state["core"])
+            self._stale = False

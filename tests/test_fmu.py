@@ -1,0 +1,588 @@
+"""The committed FMU, driven through fmpy as a co-simulation host drives it.
+
+Every behaviour is checked on ``fmus/PiezoImpactDamper.fmu`` itself, against the core
+(:class:`piezo_fmu.Simulator`) read through the slave's own table of outputs.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import os
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from ctypes import byref
+from pathlib import Path
+
+import pytest
+from fmpy import calloc, extract, free, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Discard, fmi2Error)
+from fmpy.logging import addLoggerProxy
+from fmpy.validation import validate_fmu
+
+from piezo_fmu import Parameters, Simulator, parameter_info
+from piezo_fmu import fmu_build
+from piezo_fmu.fmu_slave import OUTPUTS, CoreView
+
+ROOT = Path(__file__).resolve().parents[1]
+FMU = ROOT / fmu_build.DEFAULT_DEST
+STOP_TIME = 2.0
+METRICS = ("impact_count", "last_impact_voltage", "voltage_rms", "average_power",
+           "damping_inclination", "energy_dissipated")
+
+
+@pytest.fixture(scope="module")
+def model_description():
+    return read_model_description(str(FMU))
+
+
+@pytest.fixture(scope="module")
+def unzipdir(tmp_path_factory):
+    return extract(str(FMU), unzipdir=str(tmp_path_factory.mktemp("fmu")))
+
+
+def _collect(component, instance_name, status, category, message):
+    LOG.append((instance_name.decode("utf-8"), status, message.decode("utf-8")))
+
+
+#: Every FMU message of this module, by instance. fmpy's logger proxy keeps one logger for the
+#: whole process (the last registered), so one collector, alive as long as the module, serves all.
+LOG: list[tuple[str, int, str]] = []
+CALLBACKS = fmi2CallbackFunctions()
+CALLBACKS.logger = fmi2CallbackLoggerTYPE(_collect)
+CALLBACKS.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+CALLBACKS.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+addLoggerProxy(byref(CALLBACKS))
+INSTANCE_NUMBERS = itertools.count()
+
+
+def instantiate(unzipdir, model_description, logging_on=True) -> tuple[FMU2Slave, str]:
+    name = f"instance{next(INSTANCE_NUMBERS)}"
+    fmu = FMU2Slave(guid=model_description.guid, unzipDirectory=unzipdir, instanceName=name,
+                    modelIdentifier=model_description.coSimulation.modelIdentifier)
+    fmu.instantiate(callbacks=CALLBACKS, loggingOn=logging_on)
+    return fmu, name
+
+
+class Host:
+    """One FMU instance, initialized, with debug logging on and its log collected.
+
+    ``step`` advances by ``h`` the way fmpy does: the next point is ``n h``, the step size
+    the difference to it.
+    """
+
+    def __init__(self, unzipdir, model_description, start_values=None, inputs=None):
+        self.variables = {v.name: v for v in model_description.modelVariables}
+        self.fmu, self.name = instantiate(unzipdir, model_description)
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        self.set(**(start_values or {}))
+        self.set(**(inputs or {}))
+        self.fmu.exitInitializationMode()
+        self.t, self.n = 0.0, 0
+
+    @property
+    def messages(self) -> list[tuple[int, str]]:
+        return [(status, message) for name, status, message in LOG if name == self.name]
+
+    def set(self, **values) -> None:
+        for name, value in values.items():
+            v = self.variables[name]
+            if v.type == "Integer":
+                self.fmu.setInteger([v.valueReference], [int(value)])
+            else:
+                self.fmu.setReal([v.valueReference], [float(value)])
+
+    def outputs(self) -> dict:
+        reals = [v for v in self.variables.values() if v.causality == "output" and v.type == "Real"]
+        ints = [v for v in self.variables.values() if v.causality == "output" and v.type == "Integer"]
+        values = dict(zip((v.name for v in reals), self.fmu.getReal([v.valueReference for v in reals])))
+        values.update(zip((v.name for v in ints), self.fmu.getInteger([v.valueReference for v in ints])))
+        return values
+
+    def step(self, h: float) -> None:
+        t_next = (self.n + 1) * h
+        self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=t_next - self.t)
+        self.t, self.n = t_next, self.n + 1
+
+    def run(self, t_end: float, h: float, every: int | None = None) -> list[tuple[float, dict]]:
+        """Step with ``h`` to ``t_end``; the outputs at every ``every``-th point (and the last)."""
+        self.t, self.n = 0.0, 0
+        n_steps = round(t_end / h)
+        samples = []
+        for k in range(1, n_steps + 1):
+            self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=k * h - self.t)
+            self.t = k * h
+            if k == n_steps or (every and k % every == 0):
+                samples.append((self.t, self.outputs()))
+        return samples
+
+    def errors(self) -> list[str]:
+        return [message for status, message in self.messages if status >= fmi2Error]
+
+    def close(self) -> None:
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def core_outputs(params: Parameters, t: float) -> dict:
+    """The FMU's outputs computed from the core advanced in one call to ``t``, base at rest."""
+    sim = Simulator(params)
+    if t > 0:
+        sim.advance(t, 0.0, 0.0)
+    view = CoreView(sim)
+    return {spec.name: spec.read(view) for spec in OUTPUTS}
+
+
+def assert_outputs_close(actual: dict, expected: dict, rtol: float, scale: dict | None = None):
+    """Each output within ``rtol`` of the expected value, relative to the output's own scale."""
+    for name, want in expected.items():
+        size = max(abs(want), (scale or {}).get(name, 0.0))
+        assert abs(actual[name] - want) <= rtol * size, (name, actual[name], want)
+
+
+# -- the archive and its modelDescription ---------------------------------------------------------
+
+def test_fmpy_validate_finds_no_problems():
+    assert validate_fmu(str(FMU)) == []
+
+
+def test_committed_fmu_is_a_byte_identical_rebuild_of_the_sources():
+    assert fmu_build.check(FMU) == [], "stale FMU: run `make fmu` and commit fmus/PiezoImpactDamper.fmu"
+
+
+def test_rebuild_is_reproducible_and_the_guid_is_derived_from_the_content():
+    first, second = fmu_build.build_bytes(), fmu_build.build_bytes()
+    assert first == second
+    with zipfile.ZipFile(io.BytesIO(first)) as archive:
+        names = archive.namelist()
+        files = {name: archive.read(name) for name in names}
+        assert names == sorted(names)
+        assert all(info.date_time == fmu_build.ZIP_DATE_TIME for info in archive.infolist())
+    assert not any("__pycache__" in name or name.endswith(".pyc") for name in names)
+    root = fmu_build.ET.fromstring(files["modelDescription.xml"])
+    guid = root.get("guid")
+    assert fmu_build.content_guid(files, root) == guid
+
+
+def test_check_mode_exits_non_zero_on_a_stale_fmu(tmp_path, capsys):
+    stale = tmp_path / "stale.fmu"
+    with zipfile.ZipFile(FMU) as source, zipfile.ZipFile(stale, "w") as target:
+        for info in source.infolist():
+            data = source.read(info)
+            if info.filename == "resources/piezo_fmu/parameters.py":
+                data += b"\n# edited\n"
+            target.writestr(info, data)
+    assert fmu_build.main(["--check", "--dest", str(stale)]) == 1
+    assert "resources/piezo_fmu/parameters.py" in capsys.readouterr().err
+    fresh = tmp_path / "fresh.fmu"
+    fmu_build.main(["--dest", str(fresh)])
+    assert fmu_build.main(["--check", "--dest", str(fresh)]) == 0
+
+
+def test_fmu_bundles_the_core_and_the_slave_but_no_build_tooling():
+    with zipfile.ZipFile(FMU) as archive:
+        names = set(archive.namelist())
+        assert archive.read("resources/slavemodule.txt").decode() == fmu_build.SLAVE_MODULE
+    for module in ("__init__", "parameters", "barrier", "simulator"):
+        assert f"resources/piezo_fmu/{module}.py" in names
+    assert f"resources/{fmu_build.SLAVE_MODULE}.py" in names
+    assert "resources/piezo_fmu/fmu_build.py" not in names
+    assert {"binaries/linux64/PiezoImpactDamper.so", "binaries/win64/PiezoImpactDamper.dll"} <= names
+
+
+def test_every_variable_has_a_description_a_defined_unit_and_the_core_defaults(model_description):
+    md = model_description
+    units = {unit.name for unit in md.unitDefinitions}
+    info = parameter_info()
+    for v in md.modelVariables:
+        assert v.description, v.name
+        if v.type == "Real":
+            assert v.unit in units, v.name
+        if v.causality == "parameter":
+            assert (v.variability, v.initial) == ("fixed", "exact")
+            start = int(v.start) if v.type == "Integer" else float(v.start)
+            assert start == info[v.name]["default"], v.name
+            assert v.type == "Real" or v.name == "barrier_mode"
+            if v.type == "Real":
+                assert v.unit == info[v.name]["unit"]
+    parameters = [v.name for v in md.modelVariables if v.causality == "parameter"]
+    assert parameters == list(info)
+    assert {"M", "K", "C", "m", "d", "C_eq", "E_b", "L", "t_b", "W_b", "rho_b", "x1", "E_p", "L_p",
+            "t_p", "W_p", "rho_p", "g31", "R_load", "p0", "q0", "dp0", "dq0", "barrier_mode",
+            "M_eq", "K_eq"} == set(parameters)
+
+
+def test_interface_names_types_and_bounds(model_description):
+    md = model_description
+    by_name = {v.name: v for v in md.modelVariables}
+    inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    assert inputs == ["base_displacement", "base_velocity"]
+    assert outputs == ["main_displacement", "main_velocity", "impactor_displacement", "impactor_velocity",
+                       "deflection_left", "deflection_right", "voltage_left", "voltage_right", "base_force",
+                       "impact_count", "last_impact_voltage", "voltage_rms", "average_power",
+                       "damping_inclination", "energy_dissipated", "energy_balance_error"]
+    assert (by_name["impact_count"].type, by_name["impact_count"].variability) == ("Integer", "discrete")
+    assert by_name["barrier_mode"].type == "Integer"
+    assert (by_name["barrier_mode"].min, by_name["barrier_mode"].max) == ("0", "1")
+    assert float(by_name["m"].min) == 0.0 and by_name["m"].max is None
+    for name in ("voltage_rms", "average_power", "energy_dissipated", "deflection_left", "impact_count"):
+        assert float(by_name[name].min) == 0.0, name
+    units = {name: by_name[name].unit for name in ("base_displacement", "base_velocity", "voltage_left",
+                                                  "base_force", "average_power", "damping_inclination",
+                                                  "energy_dissipated", "R_load", "g31")}
+    assert units == {"base_displacement": "m", "base_velocity": "m/s", "voltage_left": "V", "base_force": "N",
+                     "average_power": "W", "damping_inclination": "m/s", "energy_dissipated": "J",
+                     "R_load": "Ohm", "g31": "V.m/N"}
+
+
+def test_capabilities_default_experiment_and_model_structure(model_description):
+    md = model_description
+    cs = md.coSimulation
+    assert cs.canHandleVariableCommunicationStepSize and cs.canGetAndSetFMUstate and cs.canSerializeFMUstate
+    experiment = md.defaultExperiment
+    assert (float(experiment.startTime), float(experiment.stopTime), float(experiment.stepSize)) == (0.0, 2.0, 1e-4)
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    assert [u.variable for u in md.outputs] == outputs
+    assert [u.variable for u in md.initialUnknowns] == outputs
+    assert all(u.dependencies == [] for u in md.outputs)
+    assert md.guid.startswith("{") and md.guid.endswith("}")
+
+
+# -- behaviour -------------------------------------------------------------------------------------
+
+def test_nominal_case_through_fmpy_equals_the_core():
+    result = simulate_fmu(str(FMU), stop_time=STOP_TIME, output_interval=1e-4)
+    assert len(result) == 20001
+    final = {name: float(result[name][-1]) for name in result.dtype.names}
+    assert final["time"] == pytest.approx(STOP_TIME, rel=1e-15)
+    expected = core_outputs(Parameters(), final["time"])
+    assert final["impact_count"] == expected["impact_count"] > 0
+    assert expected["damping_inclination"] > 0 and expected["voltage_rms"] > 0
+    scale = {"energy_balance_error": expected["energy_dissipated"]}
+    assert_outputs_close(final, expected, rtol=1e-12, scale=scale)
+
+
+COMMUNICATION_STEPS = (1e-5, 1e-4, 1e-2, 0.5)
+
+
+@pytest.fixture(scope="module")
+def step_runs(unzipdir, model_description):
+    """Nominal case, base at rest, to 2 s at each communication step: outputs at ~16 points."""
+    runs = {}
+    for h in COMMUNICATION_STEPS:
+        host = Host(unzipdir, model_description)
+        runs[h] = host.run(STOP_TIME, h, every=max(1, round(STOP_TIME / h) // 16))
+        host.close()
+    return runs
+
+
+@pytest.mark.parametrize("h", COMMUNICATION_STEPS)
+def test_outputs_at_every_communication_point_are_the_core_state_at_that_time(step_runs, h):
+    samples = step_runs[h]
+    assert len(samples) >= 4 and samples[-1][0] == pytest.approx(STOP_TIME, rel=1e-15)
+    params = Parameters()
+    scale = {"main_displacement": 1e-2, "impactor_displacement": 1e-2, "main_velocity": 1e-1,
+             "impactor_velocity": 1e-1, "deflection_left": 1e-4, "deflection_right": 1e-4,
+             "voltage_left": 1e3, "voltage_right": 1e3, "base_force": 10.0, "energy_balance_error": 1e-1}
+    for t, outputs in samples:
+        expected = core_outputs(params, t)
+        assert outputs["impact_count"] == expected["impact_count"], t
+        assert_outputs_close(outputs, expected, rtol=1e-12, scale=scale)
+
+
+def test_metrics_do_not_depend_on_the_communication_step(step_runs):
+    finals = {h: samples[-1][1] for h, samples in step_runs.items()}
+    reference = finals[1e-4]
+    assert reference["impact_count"] > 10
+    for h, final in finals.items():
+        assert final["impact_count"] == reference["impact_count"], h
+        for name in METRICS:
+            assert final[name] == pytest.approx(reference[name], rel=1e-9, abs=0.0), (h, name)
+
+
+def test_variable_communication_steps_give_the_core_state(unzipdir, model_description):
+    host = Host(unzipdir, model_description)
+    steps = [1e-3, 3.7e-2, 1e-6, 0.2, 5e-4, 0.31, 2e-5, 0.05] * 3
+    t = 0.0
+    for h in steps:
+        host.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        t += h
+    expected = core_outputs(Parameters(), t)
+    assert expected["impact_count"] > 5
+    assert_outputs_close(host.outputs(), expected, rtol=1e-12, scale={"energy_balance_error": 1.0})
+    host.close()
+
+
+def test_a_host_that_sets_only_the_displacement_gets_a_zero_order_hold(unzipdir, model_description):
+    h, Y, omega = 1e-3, 2e-3, 31.0
+    host = Host(unzipdir, model_description)
+    sim = Simulator(Parameters())
+    for k in range(300):
+        y = Y * math.sin(omega * k * h)
+        host.set(base_displacement=y)
+        host.step(h)
+        sim.advance((k + 1) * h, y, 0.0)
+    view = CoreView(sim)
+    expected = {spec.name: spec.read(view) for spec in OUTPUTS}
+    assert_outputs_close(host.outputs(), expected, rtol=1e-12, scale={"energy_balance_error": 1.0})
+    host.close()
+
+
+def test_base_velocity_input_moves_the_base_linearly_within_a_step(unzipdir, model_description):
+    h, Y, omega = 1e-3, 2e-3, 31.0
+    host = Host(unzipdir, model_description)
+    sim = Simulator(Parameters())
+    for k in range(300):
+        t = k * h
+        y, v = Y * math.sin(omega * t), Y * omega * math.cos(omega * t)
+        host.set(base_displacement=y, base_velocity=v)
+        host.step(h)
+        sim.advance((k + 1) * h, y, v)
+    view = CoreView(sim)
+    expected = {spec.name: spec.read(view) for spec in OUTPUTS}
+    assert_outputs_close(host.outputs(), expected, rtol=1e-12, scale={"energy_balance_error": 1.0})
+    host.close()
+
+
+def run_outputs(host: Host, t_from: float, t_to: float, h: float) -> list[dict]:
+    out = []
+    t = t_from
+    for k in range(1, round((t_to - t_from) / h) + 1):
+        t_next = t_from + k * h
+        host.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=t_next - t)
+        t = t_next
+        out.append(host.outputs())
+    return out
+
+
+def test_get_and_set_state_reruns_bit_identically(unzipdir, model_description):
+    host = Host(unzipdir, model_description)
+    run_outputs(host, 0.0, 0.3, 1e-3)
+    state = host.fmu.getFMUstate()
+    first = run_outputs(host, 0.3, 0.6, 1e-3)
+    host.fmu.setFMUstate(state)
+    again = run_outputs(host, 0.3, 0.6, 1e-3)
+    assert again == first
+    host.fmu.setFMUstate(state)  # a state can be set more than once
+    assert run_outputs(host, 0.3, 0.6, 1e-3) == first
+    host.fmu.freeFMUstate(state)
+    assert first[-1]["impact_count"] > first[0]["impact_count"]
+    host.close()
+
+
+def test_serialized_state_restores_the_full_state_in_a_new_instance(unzipdir, model_description):
+    host = Host(unzipdir, model_description, start_values={"m": 0.15})
+    run_outputs(host, 0.0, 0.25, 1e-3)
+    state = host.fmu.getFMUstate()
+    data = host.fmu.serializeFMUstate(state)
+    host.fmu.freeFMUstate(state)
+    json.loads(bytes(data))  # JSON-safe
+    first = run_outputs(host, 0.25, 0.5, 1e-3)
+    host.close()
+
+    other = Host(unzipdir, model_description)  # defaults: the state carries m = 0.15
+    restored = other.fmu.deSerializeFMUstate(data)
+    other.fmu.setFMUstate(restored)
+    other.fmu.freeFMUstate(restored)
+    assert run_outputs(other, 0.25, 0.5, 1e-3) == first
+    other.close()
+
+
+def test_two_instances_with_different_parameters_give_what_each_gives_alone(unzipdir, model_description, tmp_path):
+    designs = [{"x1": 10e-3, "m": 0.2, "d": 10e-3}, {"x1": 30e-3, "m": 0.02, "d": 3e-3}]
+    alone = []
+    for values in designs:
+        host = Host(unzipdir, model_description, start_values=values)
+        alone.append(run_outputs(host, 0.0, 0.5, 1e-3))
+        host.close()
+    # The second instance comes from a second copy of the FMU, as a host with two FMUs has.
+    other_dir = extract(str(FMU), unzipdir=str(tmp_path / "copy"))
+    hosts = [Host(unzipdir, model_description, start_values=designs[0]),
+             Host(other_dir, model_description, start_values=designs[1])]
+    together = [[], []]
+    for k in range(1, 501):
+        for host, out in zip(hosts, together):
+            out.extend(run_outputs_from(host, k, 1e-3))
+    for host in hosts:
+        host.close()
+    assert together == alone
+    assert alone[0][-1] != alone[1][-1]
+    for values, outputs in zip(designs, alone):
+        expected = core_outputs(Parameters(**values), 0.5)
+        assert_outputs_close(outputs[-1], expected, rtol=1e-12, scale={"energy_balance_error": 1.0})
+
+
+def run_outputs_from(host: Host, k: int, h: float) -> list[dict]:
+    """Step ``k`` of size ``h`` (from ``(k - 1) h``) and the outputs after it."""
+    t = (k - 1) * h
+    host.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=k * h - t)
+    return [host.outputs()]
+
+
+# -- errors: logged, non-OK, recoverable -----------------------------------------------------------
+
+@pytest.mark.parametrize("values, name", [
+    ({"m": -1.0}, "m"),
+    ({"x1": 75e-3}, "x1"),
+    ({"d": 0.0}, "d"),
+    ({"barrier_mode": 2}, "barrier_mode"),
+    ({"M": 1e-3}, "M"),
+])
+def test_bad_parameter_is_logged_by_name_and_the_first_step_is_refused(unzipdir, model_description, values, name):
+    host = Host(unzipdir, model_description, start_values=values)
+    assert any(f"{name} = " in message for message in host.errors()), host.messages
+    with pytest.raises(FMICallException) as refused:
+        host.step(1e-3)
+    assert refused.value.status == fmi2Discard
+    assert math.isnan(host.outputs()["main_displacement"])
+    host.close()
+    # The host process goes on and can instantiate again.
+    good = Host(unzipdir, model_description)
+    good.step(1e-3)
+    assert good.errors() == []
+    good.close()
+
+
+@pytest.mark.parametrize("inputs", [
+    {"base_displacement": math.nan}, {"base_displacement": math.inf}, {"base_velocity": -math.inf},
+    {"base_velocity": math.nan},
+])
+def test_non_finite_input_is_refused_and_the_instance_recovers(unzipdir, model_description, inputs):
+    host = Host(unzipdir, model_description)
+    reference = Host(unzipdir, model_description)
+    run_outputs(host, 0.0, 0.1, 1e-3)
+    expected = run_outputs(reference, 0.0, 0.2, 1e-3)[-1]
+    host.set(**inputs)
+    with pytest.raises(FMICallException) as refused:
+        host.fmu.doStep(currentCommunicationPoint=0.1, communicationStepSize=1e-3)
+    assert refused.value.status == fmi2Discard
+    assert any("not finite" in message for message in host.errors()), host.messages
+    host.set(base_displacement=0.0, base_velocity=0.0)
+    assert run_outputs(host, 0.1, 0.2, 1e-3)[-1] == expected  # the refused step changed nothing
+    host.close()
+    reference.close()
+
+
+def test_non_finite_input_at_initialization_is_refused(unzipdir, model_description):
+    host = Host(unzipdir, model_description, inputs={"base_displacement": math.nan})
+    assert any("base_displacement = nan" in message for message in host.errors()), host.messages
+    with pytest.raises(FMICallException):
+        host.step(1e-3)
+    host.close()
+
+
+@pytest.mark.parametrize("current, step, words", [
+    (0.1, 0.0, "step size"),
+    (0.1, -1e-3, "step size"),
+    (0.1, math.nan, "step size"),
+    (0.25, 1e-3, "continue"),
+    (0.05, 1e-3, "continue"),
+])
+def test_bad_step_is_refused_and_the_instance_recovers(unzipdir, model_description, current, step, words):
+    host = Host(unzipdir, model_description)
+    reference = Host(unzipdir, model_description)
+    run_outputs(host, 0.0, 0.1, 1e-3)
+    expected = run_outputs(reference, 0.0, 0.2, 1e-3)[-1]
+    with pytest.raises(FMICallException) as refused:
+        host.fmu.doStep(currentCommunicationPoint=current, communicationStepSize=step)
+    assert refused.value.status == fmi2Discard
+    assert any(words in message for message in host.errors()), host.messages
+    assert run_outputs(host, 0.1, 0.2, 1e-3)[-1] == expected
+    host.close()
+    reference.close()
+
+
+def test_setting_a_parameter_after_initialization_is_an_error(unzipdir, model_description):
+    host = Host(unzipdir, model_description)
+    host.step(1e-3)
+    host.set(m=0.5)
+    assert any("parameter m" in message for message in host.errors()), host.messages
+    with pytest.raises(FMICallException):
+        host.step(1e-3)
+    host.close()
+
+
+def test_messages_need_debug_logging(unzipdir, model_description):
+    fmu, name = instantiate(unzipdir, model_description, logging_on=False)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    with pytest.raises(FMICallException):
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=-1.0)
+    assert [entry for entry in LOG if entry[0] == name] == []
+    fmu.setDebugLogging(True, [])
+    with pytest.raises(FMICallException):
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=-1.0)
+    assert [status for entry_name, status, _ in LOG if entry_name == name] == [fmi2Error]
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def test_reset_returns_to_the_start_values(unzipdir, model_description):
+    host = Host(unzipdir, model_description)
+    first = run_outputs(host, 0.0, 0.05, 1e-3)
+    host.fmu.reset()
+    host.fmu.setupExperiment(startTime=0.0)
+    host.fmu.enterInitializationMode()
+    host.fmu.exitInitializationMode()
+    assert run_outputs(host, 0.0, 0.05, 1e-3) == first
+    host.close()
+
+
+# -- the command line and the bundle ------------------------------------------------------------
+
+def fmpy_command() -> list[str]:
+    script = Path(sys.executable).with_name("fmpy")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "fmpy"]
+
+
+def test_fmpy_info_on_the_command_line():
+    done = subprocess.run(fmpy_command() + ["info", str(FMU)], capture_output=True, text=True, check=True)
+    for word in ("PiezoImpactDamper", "base_displacement", "voltage_rms", "impact_count", "R_load"):
+        assert word in done.stdout
+
+
+def test_fmpy_simulate_on_the_command_line_with_output_interval_and_start_values(tmp_path):
+    out = tmp_path / "result.csv"
+    subprocess.run(fmpy_command() + ["simulate", str(FMU), "--stop-time", "0.5", "--output-interval", "1e-3",
+                                     "--start-values", "m", "0.2", "d", "0.01", "--output-file", str(out)],
+                   capture_output=True, text=True, check=True, cwd=tmp_path)
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == 501
+    expected = core_outputs(Parameters(m=0.2, d=0.01), 0.5)
+    final = {name: float(value) for name, value in rows[-1].items()}
+    assert float(rows[-1]["time"]) == 0.5
+    assert final["impact_count"] == expected["impact_count"]
+    # The CSV holds each value to about 16 digits.
+    assert_outputs_close(final, expected, rtol=1e-9, scale={"energy_balance_error": 1.0})
+
+
+def test_the_fmu_runs_on_its_own_bundle_with_only_numpy_and_scipy(tmp_path):
+    """A host without piezo_fmu installed (no .pth processing: ``-S``) runs the FMU's copy."""
+    sites = sorted({sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]})
+    script = f"""
+import sys, json
+sys.path.extend({sites!r})
+import fmpy
+result = fmpy.simulate_fmu({str(FMU)!r}, stop_time=0.3, output_interval=1e-3)
+core = sys.modules["piezo_fmu"].__file__
+print(json.dumps({{"core": core, "impact_count": int(result["impact_count"][-1]),
+                  "p": float(result["main_displacement"][-1])}}))
+"""
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}
+    done = subprocess.run([sys.executable, "-S", "-c", script], capture_output=True, text=True, check=True,
+                          cwd=tmp_path, env=env)
+    reply = json.loads(done.stdout.strip().splitlines()[-1])
+    assert "resources" in Path(reply["core"]).parts and str(ROOT / "src") not in reply["core"]
+    expected = core_outputs(Parameters(), 0.3)
+    assert reply["impact_count"] == expected["impact_count"]
+    assert reply["p"] == pytest.approx(expected["main_displacement"], rel=1e-12)
