@@ -25,6 +25,8 @@ ORDER = 28
 THETA = 2.0
 
 _K = np.arange(ORDER + 1)
+#: Coefficients of a bracket polynomial.
+STATE_TERMS = ORDER + 1
 #: Coefficients of the primitive of a squared bracket polynomial (degree 2 ORDER + 1).
 PRIMITIVE_TERMS = 2 * ORDER + 2
 _LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
@@ -58,13 +60,13 @@ class LinearPhase:
 
 
 def powers(s: float) -> np.ndarray:
-    """``s^k`` for k = 0..ORDER."""
-    return s ** _K
+    """``s^k`` for k < PRIMITIVE_TERMS: the first STATE_TERMS serve the bracket polynomials."""
+    return s ** _LONG
 
 
 def evaluate(c: np.ndarray, s: float) -> np.ndarray:
     """Value at normalised time ``s`` of a polynomial (or a stack of them, along axis 0)."""
-    return powers(s) @ c
+    return (s ** _K) @ c
 
 
 def primitive(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
@@ -79,8 +81,3 @@ def primitive_of_square(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
     out = np.zeros(PRIMITIVE_TERMS)
     out[1:] = weight * np.convolve(a, a) / _LONG[1:]
     return out
-
-
-def evaluate_primitive(P: np.ndarray, s: float) -> np.ndarray:
-    """Value at ``s`` of primitives (columns of ``P``, from :func:`primitive`)."""
-    return (s ** _LONG) @ P

@@ -66,7 +66,7 @@ def bernstein(a: np.ndarray) -> np.ndarray:
     return a @ _TO_BERNSTEIN
 
 
-def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None) -> list[float]:
+def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise: float = 0.0) -> list[float]:
     """All ``s`` in ``(0, 1]`` where the polynomial ``a`` changes sign in ``direction``.
 
     Parameters
@@ -74,6 +74,9 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None) -> lis
     a : power coefficients, ``a(s) = sum_k a[k] s^k``.
     direction : +1 for a crossing from negative to positive, -1 for positive to negative.
     b : its Bernstein coefficients, when already computed.
+    noise : the rounding level of the function's values; a Bernstein coefficient within it
+        counts as zero, so a function that is zero to rounding has no sign changes (rounding
+        noise would otherwise look like a swarm of roots).
 
     A root exactly at ``s = 0`` is never reported (it belongs to the previous bracket); one
     exactly at ``s = 1`` is.
@@ -82,6 +85,8 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None) -> lis
         b = bernstein(a)
     if has_no_root(b[1:]) and (b[0] == 0.0 or np.sign(b[0]) == np.sign(b[1])):
         return []
+    if noise > 0.0:
+        b = np.where(np.abs(b) <= noise, 0.0, b)
     coefficients = a.tolist()
     found: list[float] = []
     stack = [(0.0, 1.0, b)]
@@ -90,6 +95,9 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None) -> lis
         variations = _sign_changes(piece)
         if variations >= 2 and hi - lo > MIN_WIDTH:
             left, right = _split(piece)
+            if noise > 0.0:
+                left[np.abs(left) <= noise] = 0.0
+                right[np.abs(right) <= noise] = 0.0
             mid = 0.5 * (lo + hi)
             stack.append((mid, hi, right))
             stack.append((lo, mid, left))

@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from .barrier import derive_barrier
 from .metrics import MetricAccumulators, Metrics
 from .parameters import Parameters
-from .propagation import PRIMITIVE_TERMS, LinearPhase, evaluate, evaluate_primitive, primitive, primitive_of_square
+from .propagation import PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers, primitive, primitive_of_square
 from .roots import bernstein, crossings
 
 FREE = 0
@@ -29,13 +30,15 @@ LEFT = -1
 MAX_SWITCHES_AT_ONE_INSTANT = 8
 #: Relative size, against the gap, under which an event function at a bracket start is zero.
 _ZERO = 1e-13
+#: Rounding level of an event function, in ulp of the largest state term it is made of.
+_NOISE_ULPS = 64
+EPS = float(np.finfo(float).eps)
 
 # Columns of the deviation state x = (u, w, u', w', 1), with u = p - y(t), w = q - y(t).
 U, W, DU, DW, ONE = range(5)
 
 
-@dataclass(frozen=True)
-class State:
+class State(NamedTuple):
     """The state at time ``t`` (s): absolute displacements (m) and velocities (m/s).
 
     ``side`` is 0 in free flight, +1 in contact with the right barrier (``q - p = +d/2`` side),
@@ -82,8 +85,7 @@ class Impact:
     release_loss: float = math.nan
 
 
-@dataclass(frozen=True)
-class EnergyLedger:
+class EnergyLedger(NamedTuple):
     """Energy bookkeeping since the start, J.
 
     ``kinetic``, ``potential_K`` and ``potential_Keq`` are the present energies; the others
@@ -142,10 +144,12 @@ class _Bracket:
     events: list = field(default_factory=list)
     delta: np.ndarray | None = None
     ledger: np.ndarray | None = None
+    #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
+    powers: np.ndarray = field(default_factory=lambda: powers(0.0))
 
     def to_dict(self) -> dict:
         data = asdict(self)
-        for name in ("c", "delta", "ledger"):
+        for name in ("c", "delta", "ledger", "powers"):
             value = getattr(self, name)
             data[name] = None if value is None else value.tolist()
         data["events"] = [list(e) for e in self.events]
@@ -154,7 +158,7 @@ class _Bracket:
     @classmethod
     def from_dict(cls, data: dict) -> "_Bracket":
         data = dict(data)
-        for name in ("c", "delta", "ledger"):
+        for name in ("c", "delta", "ledger", "powers"):
             if data[name] is not None:
                 data[name] = np.array(data[name], dtype=float)
         data["events"] = [(float(s), int(k)) for s, k in data["events"]]
@@ -269,7 +273,7 @@ class Simulator:
             potential_Keq = 0.5 * self.barrier.K_eq * delta**2
         a = self._accounts
         br = self._bracket
-        open_C, open_Ceq, open_base = evaluate_primitive(br.ledger, br.s) if br else (0.0, 0.0, 0.0)
+        open_C, open_Ceq, open_base = br.powers @ br.ledger if br else (0.0, 0.0, 0.0)
         return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
                             potential_Keq=potential_Keq, dissipated_C=a.dissipated_C + open_C,
                             dissipated_Ceq=a.dissipated_Ceq + open_Ceq, plastic=a.plastic,
@@ -289,7 +293,8 @@ class Simulator:
         previous call left the base) goes on with the same brackets, so how time is chopped
         changes no event and no switch.
         """
-        _check_finite(t_end=t_end, y=y, v=v)
+        if not math.isfinite(t_end + y + v):
+            _check_finite(t_end=t_end, y=y, v=v)
         if not t_end > self.t:
             raise ValueError(f"t_end = {t_end!r} s must be after the present time t = {self.t!r} s")
         if y != self._y or v != self._v:
@@ -328,7 +333,8 @@ class Simulator:
 
     def _move_to(self, br: "_Bracket", s: float, t: float) -> None:
         """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
-        x = evaluate(br.c, s)
+        br.powers = powers(s)
+        x = br.powers[:STATE_TERMS] @ br.c
         base = br.base + br.v * s * br.tau
         self.t = t
         self._p, self._q = float(x[U] + base), float(x[W] + base)
@@ -343,33 +349,35 @@ class Simulator:
         x = np.array([self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0])
         c = phase.coefficients(x, phase.h)
         br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
-        # Event functions as linear maps of the state: columns of G, Bernstein rows of B.
+        # Event functions as linear maps of the state: columns of G, Bernstein rows of B, and
+        # the rounding level of each (a few ulp of the state terms that make it up).
         functionals = self._functionals[side]
         functionals[ONE, 2] = v  # p' = u' + v
         G = c @ functionals
         B = bernstein(G.T)
+        noise = _NOISE_ULPS * EPS * (np.abs(c).max(axis=0) @ np.abs(functionals))
         n_terminal = 2 if side == FREE else 1
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
         for j in range(n_terminal):
             g, b = G[:, j], B[j]
-            if abs(g[0]) <= self._zero:
+            if abs(g[0]) <= max(self._zero, noise[j]):
                 # At a switch the function that fired is zero to rounding: its sign just after
-                # the start is that of its first non-zero derivative.
+                # the start is that of its first derivative that is not.
                 g = g.copy()
                 g[0] = 0.0
-                if _start_sign(g) == direction:
+                if _start_sign(g, noise[j]) == direction:
                     br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
                 b = bernstein(g)
-            roots = crossings(g, direction, b)
+            roots = crossings(g, direction, b, noise[j])
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], targets[j]
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
-        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2]) if s <= br.s_switch]
+        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2], noise[2]) if s <= br.s_switch]
         if side != FREE:
             br.delta = G[:, 0]
-            events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1]) if s <= br.s_switch]
+            events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1], noise[1]) if s <= br.s_switch]
             events.sort()
         br.events = events
         return br
@@ -406,7 +414,7 @@ class Simulator:
         br = self._bracket
         if br is None:
             return
-        dissipated_C, dissipated_Ceq, work_base = evaluate_primitive(br.ledger, br.s)
+        dissipated_C, dissipated_Ceq, work_base = br.powers @ br.ledger
         a = self._accounts
         a.dissipated_C += dissipated_C
         a.dissipated_Ceq += dissipated_Ceq
@@ -501,16 +509,17 @@ def _event_functionals(side: int, d: float) -> np.ndarray:
     return L
 
 
-def _start_sign(g: np.ndarray) -> int:
-    """Sign of a polynomial just after s = 0 (its first non-zero coefficient)."""
-    nonzero = np.nonzero(g)[0]
-    return int(np.sign(g[nonzero[0]])) if nonzero.size else 0
+def _start_sign(g: np.ndarray, noise: float) -> int:
+    """Sign of a polynomial just after s = 0: that of its first coefficient above ``noise``."""
+    above = np.nonzero(np.abs(g) > noise)[0]
+    return int(np.sign(g[above[0]])) if above.size else 0
 
 
 def _check_finite(**values: float) -> None:
     for name, value in values.items():
         if not math.isfinite(value):
             raise ValueError(f"{name} = {value!r} is not finite; allowed range (-inf, inf)")
+
 
 
 def _free_matrix(M: float, K: float, C: float) -> np.ndarray:
