@@ -164,6 +164,22 @@ _READERS = tuple(spec.read for spec in OUTPUTS)
 _NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in OUTPUTS)
 
 
+def on_nanosecond_grid(t: float) -> float:
+    """``t`` moved to the nearest whole nanosecond when it lies within ``1e-12 * max(1, |t|)`` s
+    of it, else ``t`` unchanged."""
+    snapped = round(t * 1e9) / 1e9
+    return snapped if abs(snapped - t) <= 1e-12 * max(1.0, abs(t)) else t
+
+
+def _step_end(t_now: float, current_time: float, step_size: float) -> float:
+    """Where a step ends: ``current_time + step_size``, on the whole nanosecond it is within
+    rounding of (so that masters that round their time differently agree), never at or before
+    the FMU's own time."""
+    end = current_time + step_size
+    snapped = on_nanosecond_grid(end)
+    return snapped if snapped > t_now else end
+
+
 class PiezoImpactDamper(Fmi2Slave):
     """Piezo-impact damper (Afsharfard and Farshidianfar 2014): main mass, impact mass and two
     piezoelectric cantilever barriers, driven by base motion; exact event-driven core."""
@@ -270,7 +286,7 @@ class PiezoImpactDamper(Fmi2Slave):
             return self._fail(f"step from t = {current_time!r} s refused: {self._bad_inputs()}")
         self._outputs = None
         try:
-            sim.advance(current_time + step_size, y, v)
+            sim.advance(_step_end(t, current_time, step_size), y, v)
         except Exception as error:  # noqa: BLE001 - reported through FMI, never raised
             return self._fail(f"step from t = {current_time!r} s by {step_size!r} s rejected: {error}")
         return True
