@@ -4,33 +4,62 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test fmu fmu-check bench bench-core bench-fmu clean
+.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs bench bench-core bench-fmu bench-sweep clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
-nominal: $(STAMP)
-	$(BIN)/python harness/nominal.py
+# Debian packages: libtbb12 (ecospy) and a C compiler (the native host). Installed when
+# missing and we are root; otherwise the command to run is printed.
+system-deps:
+	@missing=""; \
+	ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
+	command -v cc >/dev/null 2>&1 || missing="$$missing gcc libc6-dev"; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	  else echo "missing Debian packages:$$missing; install them: sudo apt-get install$$missing" >&2; exit 1; fi; \
+	fi
 
-test: $(STAMP)
+nominal: system-deps $(STAMP)
+	$(BIN)/piezo-fmu nominal
+
+sweep: $(STAMP)
+	$(BIN)/piezo-fmu sweep --preset figs4-9 --force
+
+two-designs: $(STAMP)
+	$(BIN)/piezo-fmu two-designs
+
+test: system-deps $(STAMP)
 	$(BIN)/python -m pytest
 
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
+# The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
 fmu: $(STAMP)
 	$(BIN)/python -m piezo_fmu.fmu_build
+	$(BIN)/python crosscheck/run_crosscheck.py --write
+
+crosscheck: system-deps $(STAMP)
+	$(BIN)/python crosscheck/run_crosscheck.py all
+
+hosts: system-deps $(STAMP)
+	$(BIN)/python hosts/coupled.py
 
 fmu-check: $(STAMP)
 	$(BIN)/python -m piezo_fmu.fmu_build --check
 
-bench: bench-core bench-fmu
+bench: bench-core bench-fmu bench-sweep
 
 bench-core: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
 
 bench-fmu: $(STAMP)
 	$(BIN)/python benchmarks/bench_fmu.py
+
+bench-sweep: $(STAMP)
+	$(BIN)/python benchmarks/bench_sweep.py
 
 clean:
 	rm -rf $(VENV) results build

@@ -1,0 +1,163 @@
+"""The sweep engine's backends: where the points of a sweep run.
+
+Each worker extracts nothing itself and instantiates the FMU once; every point then resets the
+instance, sets its parameters and steps it (:meth:`harness.fmu.Instance.run_point`). Points
+come back in the order they finish, as JSON-safe records.
+
+- :class:`ProcessPool` (default): local worker processes, one per core. FMU instances in one
+  process would share the GIL, so parallelism needs processes.
+- :class:`DaskCluster`: a ``distributed`` cluster, given by its scheduler address or started
+  locally. The FMU travels to the workers as bytes (scattered once), so remote workers need
+  only this package and fmpy installed, not the file.
+"""
+
+from __future__ import annotations
+
+import atexit
+import concurrent.futures
+import ctypes
+import multiprocessing
+import os
+import shutil
+import signal
+import tempfile
+import threading
+from pathlib import Path
+from typing import Iterable, Iterator, Optional
+
+from .fmu import FmuModel, Instance
+
+
+def default_jobs() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+# -- local process pool ----------------------------------------------------------------------------
+
+_WORKER: Optional[Instance] = None
+
+
+def _die_with_parent() -> None:
+    """Linux: have the kernel end this worker when the sweep process dies (even by SIGKILL)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:  # pragma: no cover - not Linux
+        pass
+
+
+def _init_worker(fmu_path: str, unzipdir: str) -> None:
+    global _WORKER
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _WORKER = Instance(FmuModel(fmu_path), unzipdir, instance_name=f"worker{os.getpid()}")
+
+
+def _run_in_worker(index: int, values: dict, stop_time: float, step: float) -> dict:
+    return _WORKER.run_point(index, values, stop_time, step)
+
+
+class ProcessPool:
+    """Points run in ``jobs`` local processes, each with its own FMU instance."""
+
+    def __init__(self, model: FmuModel, unzipdir: str, jobs: int):
+        self.jobs = jobs
+        self.description = f"process pool, {jobs} worker{'s' if jobs != 1 else ''}"
+        self._executor = concurrent.futures.ProcessPoolExecutor(
+            max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker, initargs=(str(model.path), unzipdir))
+
+    def run(self, todo: Iterable[tuple]) -> Iterator[tuple]:
+        """Run ``(tag, index, values, stop_time, step)`` items; yield ``(tag, record)`` as each
+        point finishes."""
+        futures = {self._executor.submit(_run_in_worker, index, values, stop_time, step): tag
+                   for tag, index, values, stop_time, step in todo}
+        for future in concurrent.futures.as_completed(futures):
+            yield futures[future], future.result()
+
+    def close(self, cancel: bool = False) -> None:
+        if cancel:
+            # Interrupted: drop queued points and end the workers now (a point in flight is
+            # simply not recorded; --resume runs it again).
+            processes = list(getattr(self._executor, "_processes", {}).values())
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            for process in processes:
+                if process.is_alive():
+                    process.kill()
+        else:
+            self._executor.shutdown(wait=True)
+
+
+# -- dask.distributed ------------------------------------------------------------------------------
+
+_DASK_INSTANCES = threading.local()
+
+
+def _dask_instance(fmu_bytes: bytes, guid: str) -> Instance:
+    """This worker thread's FMU instance for the FMU with ``guid``, made on first use."""
+    cache = getattr(_DASK_INSTANCES, "by_guid", None)
+    if cache is None:
+        cache = _DASK_INSTANCES.by_guid = {}
+    if guid not in cache:
+        folder = Path(tempfile.mkdtemp(prefix="piezo_fmu_worker_"))
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+        path = folder / "PiezoImpactDamper.fmu"
+        path.write_bytes(fmu_bytes)
+        model = FmuModel(path)
+        unzipdir = model.extract()
+        atexit.register(shutil.rmtree, unzipdir, ignore_errors=True)
+        cache[guid] = Instance(model, unzipdir, instance_name=f"dask{os.getpid()}")
+    return cache[guid]
+
+
+def _run_on_dask(fmu_bytes: bytes, guid: str, index: int, values: dict, stop_time: float, step: float) -> dict:
+    return _dask_instance(fmu_bytes, guid).run_point(index, values, stop_time, step)
+
+
+class DaskCluster:
+    """Points run on a ``distributed`` cluster: ``scheduler`` is its address, or ``None`` to
+    start a local cluster of ``jobs`` single-threaded worker processes."""
+
+    def __init__(self, model: FmuModel, scheduler: Optional[str], jobs: int):
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        self._cluster = None
+        if scheduler is None:
+            self._cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                         dashboard_address=None, silence_logs=logging.ERROR)
+            self._client = Client(self._cluster)
+            self.description = f"dask local cluster, {jobs} worker{'s' if jobs != 1 else ''}"
+        else:
+            self._client = Client(scheduler, timeout="30s")
+            workers = len(self._client.scheduler_info().get("workers", {}))
+            self.description = f"dask scheduler {scheduler}, {workers} workers"
+        self._guid = model.guid
+        self._fmu = self._client.scatter(model.path.read_bytes(), broadcast=True)
+        self._futures = []
+
+    def run(self, todo: Iterable[tuple]) -> Iterator[tuple]:
+        """Run ``(tag, index, values, stop_time, step)`` items; yield ``(tag, record)`` as each
+        point finishes."""
+        from distributed import as_completed
+
+        tags = {}
+        for tag, index, values, stop_time, step in todo:
+            future = self._client.submit(_run_on_dask, self._fmu, self._guid, index, values,
+                                         stop_time, step, pure=False)
+            tags[future.key] = tag
+            self._futures.append(future)
+        for future in as_completed(self._futures):
+            yield tags[future.key], future.result()
+
+    def close(self, cancel: bool = False) -> None:
+        if cancel and self._futures:
+            self._client.cancel(self._futures)
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()

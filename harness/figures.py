@@ -1,0 +1,225 @@
+"""Figures in the paper's units (mm, kg, cm/s, V, W): Fig. 3 (nominal case), the sweep
+contours of Figs. 4-9 with the design zones outlined, and Fig. 10 (two designs).
+
+Matplotlib runs headless (Agg); every function writes PNG files and returns their paths.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+#: Parameter units shown in the paper's units: lengths in mm.
+UNIT_DISPLAY = {"m": (1e3, "mm")}
+#: Metrics: (factor, unit, label).
+METRIC_DISPLAY = {
+    "DI": (100.0, "cm/s", "Damping inclination DI"),
+    "V_rms": (1.0, "V", "RMS output voltage $V_{rms}$"),
+    "P_ave": (1.0, "W", "Average power $P_{ave}$"),
+    "perfectibility": (1.0, "%", "Perfectibility"),
+}
+#: Which zone each paper figure outlines (Figs. 4-6 show the metric alone).
+PAPER_FIGURES = {
+    "fig4": ("DI", None), "fig5": ("V_rms", None), "fig6": ("P_ave", None),
+    "fig7": ("DI", "DI"), "fig8": ("V_rms", "V_rms"), "fig9": ("perfectibility", "perfectibility"),
+}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def axis_scale(units: str) -> tuple[float, str]:
+    """Factor and unit to show a parameter in (metres as millimetres)."""
+    return UNIT_DISPLAY.get(units, (1.0, units))
+
+
+def display_value(name: str, value: float, units: str) -> str:
+    factor, shown = axis_scale(units)
+    return f"{name} = {value * factor:.4g} {shown}".rstrip()
+
+
+def symbol(name: str) -> str:
+    """A parameter name as the paper writes it, in TeX: x1 as $x_1$, C_eq as $C_{eq}$."""
+    if "_" in name:
+        head, tail = name.split("_", 1)
+        return f"${head}_{{{tail}}}$"
+    letters = name.rstrip("0123456789")
+    if letters and letters != name:
+        return f"${letters}_{{{name[len(letters):]}}}$"
+    return f"${name}$"
+
+
+def _axis_label(ds, name: str) -> str:
+    factor, shown = axis_scale(ds[name].attrs.get("units", ""))
+    return f"{symbol(name)} ({shown})" if shown and shown != "1" else symbol(name)
+
+
+def _plot_axes(ds, metric: str) -> tuple[str, ...]:
+    dims = ds[metric].dims
+    if "x1" in dims and len(dims) == 2:
+        return ("x1", dims[1] if dims[0] == "x1" else dims[0])  # x1 across, as in the paper
+    return tuple(dims)
+
+
+def draw_panel(ax, ds, metric: str, zone_mask: Optional[np.ndarray] = None,
+               paper_zone: Optional[dict] = None, title: str = "") -> None:
+    """One contour panel of ``metric`` over a 2-D sweep (a line over a 1-D one), with our zone
+    (solid red outline, best point starred) and the paper's design zone (dashed black)."""
+    factor, unit, label = METRIC_DISPLAY.get(metric, (1.0, ds[metric].attrs.get("units", ""), metric))
+    names = _plot_axes(ds, metric)
+    if len(names) == 1:
+        name = names[0]
+        fx, _ = axis_scale(ds[name].attrs.get("units", ""))
+        x, y = ds[name].values * fx, ds[metric].values * factor
+        ax.plot(x, y, "o-", ms=3)
+        if zone_mask is not None and zone_mask.any():
+            ax.plot(x[zone_mask], y[zone_mask], "o", color="red", ms=5, label="our zone")
+        if paper_zone and name in paper_zone:
+            lo, hi = paper_zone[name]
+            ax.axvspan(lo * fx, hi * fx, color="k", alpha=0.1, label="paper's design zone")
+        ax.set_xlabel(_axis_label(ds, name))
+        ax.set_ylabel(f"{label} ({unit})")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        ax.set_title(title, fontsize=9)
+        return
+    xname, yname = names
+    data = ds[metric].transpose(yname, xname)
+    fx, _ = axis_scale(ds[xname].attrs.get("units", ""))
+    fy, _ = axis_scale(ds[yname].attrs.get("units", ""))
+    x, y = ds[xname].values * fx, ds[yname].values * fy
+    z = data.values * factor
+    if np.isfinite(z).any():
+        filled = ax.contourf(x, y, np.ma.masked_invalid(z), levels=20, cmap="viridis")
+        ax.figure.colorbar(filled, ax=ax, label=f"{label} ({unit})")
+    if zone_mask is not None and zone_mask.any():
+        dims = ds[metric].dims
+        mask = zone_mask if dims == (yname, xname) else zone_mask.T
+        ax.contour(x, y, mask.astype(float), levels=[0.5], colors="red", linewidths=1.5)
+        best = np.unravel_index(np.nanargmax(np.where(mask, z, np.nan)), z.shape)
+        ax.plot([], [], color="red", lw=1.5, label="our zone")
+        ax.plot(x[best[1]], y[best[0]], ls="none", marker="*", color="red", ms=13, mec="white",
+                clip_on=False, zorder=5, label="our best point")
+    if paper_zone and (xname in paper_zone or yname in paper_zone):
+        x0, x1 = (v * fx for v in paper_zone.get(xname, (ds[xname].values.min(), ds[xname].values.max())))
+        y0, y1 = (v * fy for v in paper_zone.get(yname, (ds[yname].values.min(), ds[yname].values.max())))
+        ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", lw=1.5, label="paper's design zone")
+    ax.set_xlabel(_axis_label(ds, xname))
+    ax.set_ylabel(_axis_label(ds, yname))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="lower right", framealpha=0.8)
+    ax.set_title(title, fontsize=9)
+
+
+def _subtitle(ds) -> str:
+    import json
+
+    fixed = json.loads(ds.attrs.get("fixed_parameters", "{}"))
+    units = json.loads(ds.attrs.get("fixed_parameter_units", "{}"))
+    shown = ", ".join(display_value(k, v, units.get(k, "")) for k, v in fixed.items())
+    return f"{shown}{'; ' if shown else ''}{ds.attrs.get('stop_time_s', 0):g} s per run"
+
+
+def sweep_figures(ds, zones: dict, paper_zone: Optional[dict], folder: Path) -> list[Path]:
+    """``DI.png``, ``V_rms.png``, ``P_ave.png`` and ``perfectibility.png`` of one sweep, each
+    with its own zone (P_ave shares V_rms's) and the paper's design zone; none beyond 2-D."""
+    if len(ds["DI"].dims) > 2:
+        return []
+    plt = _plt()
+    written = []
+    for metric, zone_of in (("DI", "DI"), ("V_rms", "V_rms"), ("P_ave", "V_rms"),
+                            ("perfectibility", "perfectibility")):
+        fig, ax = plt.subplots(figsize=(6.2, 4.6))
+        draw_panel(ax, ds, metric, zones.get(zone_of), paper_zone,
+                   f"{METRIC_DISPLAY[metric][2]}: sweep {ds.attrs.get('sweep')} ({_subtitle(ds)})")
+        fig.tight_layout()
+        path = Path(folder) / f"{metric}.png"
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def paper_figures(panels: dict, folder: Path) -> list[Path]:
+    """Figs. 4-9: one file per figure, panel (a) the (x1, m) sweep and (b) the (x1, d) sweep.
+
+    ``panels`` maps the panel letter to ``(dataset, zones, paper_zone)``."""
+    plt = _plt()
+    written = []
+    for figure, (metric, zone_of) in PAPER_FIGURES.items():
+        fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 4.8), squeeze=False)
+        for ax, (letter, (ds, zones, paper_zone)) in zip(axes[0], panels.items()):
+            mask = zones.get(zone_of) if zone_of else None
+            draw_panel(ax, ds, metric, mask, paper_zone if zone_of == "perfectibility" or zone_of is None else None,
+                       f"({letter}) {METRIC_DISPLAY[metric][2]}, {_subtitle(ds)}")
+        fig.suptitle(f"{figure.replace('fig', 'Fig. ')}: {METRIC_DISPLAY[metric][2]}"
+                     + {"DI": "; vibratory-based zone", "V_rms": "; energy-based zone",
+                        "perfectibility": "; design zones"}.get(zone_of or "", ""), fontsize=11)
+        fig.tight_layout()
+        path = Path(folder) / f"{figure}.png"
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def nominal_figures(t, with_damper: dict, without_damper: dict, folder: Path, title: str) -> list[Path]:
+    """Fig. 3: (a) the main mass with and without the damper, (b) each barrier's voltage."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    ax.plot(t, 1e3 * without_damper["main_displacement"], color="0.55", lw=1.0, label="without damper")
+    ax.plot(t, 1e3 * with_damper["main_displacement"], color="C0", lw=1.0, label="with piezo-impact damper")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("main mass displacement $p$ (mm)")
+    ax.set_title(f"Fig. 3(a): main mass with and without the damper ({title})", fontsize=9)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    a = Path(folder) / "fig3a.png"
+    fig.savefig(a, dpi=130)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(2, 1, figsize=(7.5, 5.2), sharex=True)
+    for ax, side, color in zip(axes, ("left", "right"), ("C1", "C2")):
+        ax.plot(t, with_damper[f"voltage_{side}"], color=color, lw=0.8)
+        ax.set_ylabel(f"$V$ {side} barrier (V)")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(f"Fig. 3(b): output voltage of each piezoelectric barrier ({title})", fontsize=9)
+    fig.tight_layout()
+    b = Path(folder) / "fig3b.png"
+    fig.savefig(b, dpi=130)
+    plt.close(fig)
+    return [a, b]
+
+
+def two_designs_figure(t, runs: dict, folder: Path, title: str) -> Path:
+    """Fig. 10: (a) the main mass and (b) the running RMS voltage of the two designs."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
+    for (label, series), color in zip(runs.items(), ("C0", "C3")):
+        axes[0].plot(t, 1e3 * series["main_displacement"], color=color, lw=0.9, label=label)
+        axes[1].plot(t, series["voltage_rms"], color=color, lw=1.2, label=label)
+    axes[0].set_ylabel("main mass displacement $p$ (mm)")
+    axes[0].set_title("(a) vibratory behaviour", fontsize=9)
+    axes[1].set_ylabel("$V_{rms}$ over the impacts so far (V)")
+    axes[1].set_yscale("symlog", linthresh=1.0)
+    axes[1].set_title("(b) energy behaviour (RMS output voltage, eq. 30)", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("time (s)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(1.1, -0.14), ncol=2, frameon=False)
+    fig.suptitle(f"Fig. 10: designed vs poor piezo-impact damper ({title})", fontsize=11)
+    fig.tight_layout()
+    path = Path(folder) / "fig10.png"
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path

@@ -1,0 +1,157 @@
+"""Running sweeps: the folder of each sweep, the incremental run, and the results.
+
+A sweep folder ``OUT`` ends up with:
+
+- ``sweep.json``: what was asked (axes, fixed values, duration, step) and the FMU's GUID;
+- ``points.jsonl``: one line per finished point, appended and flushed as it finishes;
+- ``sweep.nc``: the xarray Dataset (metrics over the axes, perfectibility, status);
+- ``sweep.csv``: the same as a tidy table, one row per point;
+- ``zones.json``: our vibratory, energy and design zones and how the paper's zone fares;
+- ``DI.png``, ``V_rms.png``, ``P_ave.png``, ``perfectibility.png``: contours with the zones.
+
+Several sweeps (a preset set) share one backend, so its workers start once and stay busy.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+from . import analysis, figures
+from .fmu import FmuModel
+from .spec import SweepSpec, UsageError, prepare_output_dir
+from .store import SPEC_FILE, PointStore
+
+
+@dataclass
+class SweepRun:
+    """One sweep and its folder; ``done`` holds the records already finished."""
+
+    spec: SweepSpec
+    folder: Path
+    done: dict = field(default_factory=dict)
+    header: dict = field(default_factory=dict)  # what sweep.json will say
+    start_over: bool = False  # discard the points recorded in the folder
+
+    def begin(self) -> None:
+        """Commit the folder to this sweep: write ``sweep.json`` (and drop old points if
+        starting over). Called only once every check of every sweep has passed."""
+        if self.start_over:
+            self.store.clear()
+        (self.folder / SPEC_FILE).write_text(json.dumps(self.header, indent=2) + "\n")
+
+    @property
+    def store(self) -> PointStore:
+        return PointStore(self.folder)
+
+    def todo(self) -> list[tuple[int, dict]]:
+        return [(index, self.spec.values_at(point)) for index, point in self.spec.points()
+                if index not in self.done]
+
+
+def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, force: bool,
+               option: str = "--out") -> SweepRun:
+    """Check the folder of one sweep and read what it holds; change nothing (see
+    :meth:`SweepRun.begin`).
+
+    Without ``resume`` a folder that already holds finished points is refused unless ``force``
+    (which starts over); with ``resume`` it must hold this same sweep of this same FMU.
+    """
+    folder = prepare_output_dir(folder, option)
+    spec_path = folder / SPEC_FILE
+    store = PointStore(folder)
+    header = {**spec.to_dict(), "fmu": str(model.path), "fmu_guid": model.guid}
+    done: dict = {}
+    start_over = force
+    if spec_path.is_file():
+        try:
+            old = json.loads(spec_path.read_text())
+        except (OSError, ValueError):
+            old = None
+        if resume:
+            if old is None:
+                raise UsageError(f"--resume: {spec_path} cannot be read; use --force to start over")
+            same = (json.dumps({k: old.get(k) for k in ("axes", "fixed", "stop_time", "step")}, sort_keys=True)
+                    == spec.fingerprint())
+            if not same:
+                raise UsageError(f"--resume: {folder} holds a different sweep (its {SPEC_FILE} has other axes, "
+                                 "fixed values, duration or step); use the same arguments, or --force to start over")
+            if old.get("fmu_guid") != model.guid:
+                raise UsageError(f"--resume: {folder} was run with another FMU (GUID {old.get('fmu_guid')}, "
+                                 f"now {model.guid}); use --force to start over")
+            done = store.load()
+        elif not force and store.path.is_file() and store.path.stat().st_size > 0:
+            count = len(store.load())
+            raise UsageError(f"{option} {folder} already holds a sweep ({count} of its points finished); "
+                             "pass --resume to finish it, --force to start over, or choose another folder")
+    else:
+        start_over = True  # points without a sweep.json belong to no known sweep
+    expected = dict(spec.points())
+    for index, record in done.items():
+        point = expected.get(index)
+        if point is None or any(record["values"].get(k) != v for k, v in point.items()):
+            raise UsageError(f"--resume: point {index} in {store.path} does not match the sweep; "
+                             "use --force to start over")
+    return SweepRun(spec, folder, done, header, start_over)
+
+
+def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> None:
+    """Run every unfinished point of ``runs`` on ``backend``, appending each record to its
+    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal."""
+    from tqdm import tqdm
+
+    todo, stores = [], []
+    for number, run in enumerate(runs):
+        stores.append(run.store.open())
+        todo.extend((number, index, values, run.spec.stop_time, run.spec.step)
+                    for index, values in run.todo())
+    total = sum(run.spec.size for run in runs)
+    finished = total - len(todo)
+    bar = tqdm(total=total, initial=finished, unit="pt", desc="sweep", dynamic_ncols=True,
+               disable=(not progress) if progress is not None else None, file=sys.stderr)
+    interrupted = True
+    try:
+        for number, record in backend.run(todo):
+            stores[number].append(record)
+            runs[number].done[record["index"]] = record
+            bar.update(1)
+        interrupted = False
+    finally:
+        bar.close()
+        for store in stores:
+            store.close()
+        backend.close(cancel=interrupted)
+
+
+def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZONE_QUANTILE) -> dict:
+    """Write the Dataset, the tidy CSV, the zones and the figures of one finished sweep; return
+    ``{"dataset", "zones", "masks", "files"}``."""
+    ds = analysis.build_dataset(run.spec, run.done, model)
+    zones = analysis.zones_report(ds, quantile)
+    masks = {metric: analysis.top_zone(ds, metric, quantile)[0] for metric in analysis.ZONE_KINDS}
+    ds.attrs["zones"] = json.dumps(zones)
+    files = [run.folder / "sweep.nc", run.folder / "sweep.csv", run.folder / "zones.json"]
+    analysis.save_dataset(ds, files[0])
+    analysis.tidy_frame(ds, quantile).to_csv(files[1], index=False)
+    files[2].write_text(json.dumps(zones, indent=2) + "\n")
+    paper_zone = {name: analysis.PAPER_ZONES[name] for name in ds["DI"].dims if name in analysis.PAPER_ZONES}
+    files += figures.sweep_figures(ds, masks, paper_zone or None, run.folder)
+    return {"dataset": ds, "zones": zones, "masks": masks, "paper_zone": paper_zone or None, "files": files}
+
+
+def display(ds):
+    """A formatter ``(name, lo, hi=None) -> text`` in the paper's units for this dataset:
+    ``x1 0-25 mm``, ``m = 0.2 kg``, ``DI = 0.63 cm/s``."""
+    def show(name: str, lo: float, hi: float | None = None) -> str:
+        if name in figures.METRIC_DISPLAY:
+            factor, unit, _ = figures.METRIC_DISPLAY[name]
+        else:
+            factor, unit = figures.axis_scale(ds[name].attrs.get("units", "") if name in ds else "")
+        unit = "" if unit in ("", "1") else f" {unit}"
+        if hi is None or lo == hi:
+            return f"{name} = {lo * factor:.4g}{unit}"
+        return f"{name} {lo * factor:.4g}-{hi * factor:.4g}{unit}"
+    return show
