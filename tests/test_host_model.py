@@ -1,0 +1,180 @@
+"""A native (C) host, and a host model that plugs the damper into a primary structure.
+
+1. ``hosts/native_host.c`` is built here with the system C compiler against the FMI 2.0
+   headers and loads ``binaries/linux64/PiezoImpactDamper.so`` from the extracted FMU. Without
+   libpython in the process the binary cannot be loaded (proved); under the launcher
+   ``hosts/run_native_host.sh`` the nominal case (MODEL.md section 7, 2 s at a 1 ms step) runs
+   cleanly, exits with status 0 and nothing on stderr, and its results equal fmpy's bit for bit.
+2. ``hosts/system/OspSystemStructure.xml`` couples ``PrimaryStructure.fmu`` (an SDOF floor on a
+   synthetic ground-motion record, built here from ``hosts/primary_structure.py``) with the
+   damper both ways, in OSP libcosim; the SSP version runs in ecos and gives the same result.
+   The coupled run's energy ledger closes to the co-simulation coupling error, which shrinks at
+   first order with the communication step, and the response converges.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from crosscheck import importers, scenario  # noqa: E402
+from hosts import coupled, native  # noqa: E402
+
+FMU = REPO / "fmus" / "PiezoImpactDamper.fmu"
+NOMINAL_STOP, NOMINAL_STEP = 2.0, 1e-3
+
+
+# -- the C host ---------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory) -> Path:
+    return native.build(tmp_path_factory.mktemp("native") / "native_host")
+
+
+def test_c_host_builds_with_the_system_compiler(host):
+    assert host.is_file() and os.access(host, os.X_OK)
+    assert (native.fmi_headers() / "fmi2FunctionTypes.h").is_file()
+
+
+def test_c_host_cannot_load_the_fmu_without_libpython(host, tmp_path):
+    """The reason for the launcher: the pythonfmu binary does not link libpython."""
+    import zipfile
+
+    with zipfile.ZipFile(FMU) as archive:
+        archive.extractall(tmp_path / "fmu")
+    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH")}
+    completed = subprocess.run([str(host), str(tmp_path / "fmu"), str(tmp_path / "out.csv"), "--stop", "0.01"],
+                               capture_output=True, text=True, env=env, timeout=60)
+    assert completed.returncode == 1
+    assert "dlopen failed" in completed.stderr and "undefined symbol" in completed.stderr
+
+
+@lru_cache(maxsize=None)
+def fmpy_nominal() -> importers.Result:
+    return importers.run_fmpy(FMU, times=scenario.grid(0.0, NOMINAL_STOP, NOMINAL_STEP), inputs={},
+                              start_values={})
+
+
+def test_c_host_runs_the_nominal_case_cleanly_and_equals_fmpy(host, tmp_path):
+    out = tmp_path / "nominal.csv"
+    completed = native.run(FMU, out, ["--stop", repr(NOMINAL_STOP), "--step", repr(NOMINAL_STEP)],
+                           executable=host)
+    assert completed.returncode == 0  # a clean exit: no crash in the interpreter's teardown
+    assert completed.stderr == "" and completed.stdout == ""
+    time, outputs = scenario.read_csv(out)
+    reference = fmpy_nominal()
+    assert list(outputs) == list(reference.outputs)
+    comparison = scenario.compare(time, outputs, reference.time, reference.outputs, rel_tol=0.0)
+    assert comparison.all_bit_identical, comparison.report()
+    assert outputs["impact_count"][-1] > 0 and outputs["main_displacement"][0] == 0.01
+
+
+def test_c_host_runs_the_cross_check_scenario(host, tmp_path):
+    out = tmp_path / "xc.csv"
+    args = ["--stop", "3", "--step", "0.001", "--in", str(scenario.IN_CSV), "--set", "p0=0", "--set", "q0=0"]
+    native.run(FMU, out, args, executable=host)
+    time, outputs = scenario.read_csv(out)
+    ref_time, ref = scenario.read_reference()
+    comparison = scenario.compare(time, outputs, ref_time, ref)
+    assert comparison.passed and comparison.all_bit_identical, comparison.report()
+
+
+def test_c_host_reports_fmu_errors_with_status_1(host, tmp_path):
+    """A rejected step (here: q0 outside the gap) is an FMU error, not a crash."""
+    with pytest.raises(subprocess.CalledProcessError) as failure:
+        native.run(FMU, tmp_path / "bad.csv", ["--stop", "0.01", "--set", "p0=0"], executable=host)
+    assert failure.value.returncode == 1 and "fmi2DoStep failed" in failure.value.stderr
+    assert "invalid start values" in failure.value.stderr  # the FMU's own message, via the logger
+
+
+# -- the host model ------------------------------------------------------------------------------------
+
+CONVERGENCE_STEPS = (4e-3, 2e-3, 1e-3, 5e-4)
+
+
+@lru_cache(maxsize=None)
+def osp(step: float = coupled.STEP_SIZE, with_damper: bool = True) -> coupled.Run:
+    return coupled.run_osp(step, coupled.STOP_TIME, with_damper)
+
+
+@lru_cache(maxsize=None)
+def ecos_ssp() -> coupled.Run:
+    return coupled.run_ssp_ecos(coupled.STEP_SIZE, coupled.STOP_TIME)
+
+
+def test_structure_alone_follows_its_record_and_keeps_its_ledger():
+    bare = osp(with_damper=False)
+    s = bare.structure
+    assert np.isclose(np.max(np.abs(s["ground_acceleration"])), 1.0, rtol=1e-9)  # PGA of the record
+    assert np.all(s["work_device"] == 0.0)
+    # Runge-Kutta's own ledger error, far below the coupling error of the coupled runs
+    assert abs(s["energy_balance_error"][-1]) < 1e-9 * s["work_ground"][-1]
+
+
+def test_coupled_osp_run_couples_both_ways_and_damps_the_floor():
+    run, bare = osp(), osp(with_damper=False)
+    assert len(run.time) == 5001 and run.time[-1] == coupled.STOP_TIME
+    s, d = run.structure, run.damper
+    # the damper's base follows the floor and its force acts back on it
+    assert d["impact_count"][-1] > 20
+    assert np.max(np.abs(s["work_device"])) > 0.01
+    peak_with = np.max(np.abs(s["relative_displacement"]))
+    peak_without = np.max(np.abs(bare.structure["relative_displacement"]))
+    assert peak_with < 0.7 * peak_without
+    assert np.sqrt(np.mean(s["relative_displacement"] ** 2)) < 0.7 * np.sqrt(
+        np.mean(bare.structure["relative_displacement"] ** 2))
+
+
+def test_coupled_energy_ledger_closes_to_the_coupling_error():
+    book = coupled.ledger(osp())
+    # each FMU's own ledger closes to its integrator's error ...
+    assert abs(book.damper_error) < 1e-12 and abs(book.structure_error) < 1e-9
+    # ... and the system's closes to the interface error of the co-simulation: small, and much
+    # larger than those (so it is the coupling that shows here, not an integrator)
+    assert book.relative_residual < 0.01
+    assert book.max_residual > 1e3 * (abs(book.damper_error) + abs(book.structure_error))
+    assert book.work_ground > 0.1 and book.dissipated_damper > 0.02
+
+
+def test_coupled_run_converges_as_the_step_shrinks():
+    runs = [osp(step) for step in CONVERGENCE_STEPS]
+    residuals = [coupled.ledger(run).max_residual for run in runs]
+    # first order: the ledger residual halves (at least roughly) with the step
+    for coarse, fine in zip(residuals[:-1], residuals[1:]):
+        assert fine < coarse / 1.4, residuals
+    assert residuals[-1] < residuals[0] / 6, residuals
+    # the trajectory converges at first order over the first second (11 impacts), before the
+    # impacts' sensitivity takes over: successive differences halve
+    differences = []
+    for coarse, fine in zip(runs[:-1], runs[1:]):
+        a, b = coupled.on_common_grid(coarse, fine, "relative_displacement")
+        n = int(round(1.0 / coarse.step)) + 1
+        differences.append(np.max(np.abs(a[:n] - b[:n])))
+    for coarse, fine in zip(differences[:-1], differences[1:]):
+        assert 1.6 < coarse / fine < 2.5, differences
+    # and the global measures settle
+    peaks = [np.max(np.abs(run.structure["relative_displacement"])) for run in runs]
+    assert abs(peaks[-1] - peaks[-2]) < 0.02 * peaks[-1], peaks
+
+
+def test_ssp_in_ecos_runs_the_same_system():
+    ecos, libcosim = ecos_ssp(), osp()
+    assert len(ecos.time) == len(libcosim.time)
+    assert ecos.damper["main_displacement"][0] == 0.0  # the ssv's p0 = 0 was applied
+    assert ecos.damper["impact_count"][-1] > 20
+    assert coupled.ledger(ecos).relative_residual < 0.01
+    for which in ("structure", "damper"):
+        a, b = getattr(libcosim, which), getattr(ecos, which)
+        comparison = scenario.compare(ecos.time, b, libcosim.time, a)
+        assert comparison.all_bit_identical, (
+            f"{which}: ecos SSP against libcosim OSP\n{comparison.report()}\necos adds the step to its time at "
+            "every step; both FMUs must take each step's end to the whole nanosecond (crosscheck/ReadMe.md)")
