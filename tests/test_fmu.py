@@ -210,14 +210,14 @@ def test_every_variable_has_a_description_a_defined_unit_and_the_core_defaults(m
             assert (v.variability, v.initial) == ("fixed", "exact")
             start = int(v.start) if v.type == "Integer" else float(v.start)
             assert start == info[v.name]["default"], v.name
-            assert v.type == "Real" or v.name == "barrier_mode"
+            assert v.type == "Real" or v.name in ("barrier_mode", "voltage_model")
             if v.type == "Real":
                 assert v.unit == info[v.name]["unit"]
     parameters = [v.name for v in md.modelVariables if v.causality == "parameter"]
     assert parameters == list(info)
     assert {"M", "K", "C", "m", "d", "C_eq", "E_b", "L", "t_b", "W_b", "rho_b", "x1", "E_p", "L_p",
             "t_p", "W_p", "rho_p", "g31", "R_load", "p0", "q0", "dp0", "dq0", "barrier_mode",
-            "M_eq", "K_eq"} == set(parameters)
+            "M_eq", "K_eq", "voltage_model", "d31", "eps33"} == set(parameters)
 
 
 def test_interface_names_types_and_bounds(model_description):
@@ -229,10 +229,13 @@ def test_interface_names_types_and_bounds(model_description):
     assert outputs == ["main_displacement", "main_velocity", "impactor_displacement", "impactor_velocity",
                        "deflection_left", "deflection_right", "voltage_left", "voltage_right", "base_force",
                        "impact_count", "last_impact_voltage", "voltage_rms", "average_power",
-                       "damping_inclination", "energy_dissipated", "energy_balance_error"]
+                       "damping_inclination", "energy_dissipated", "energy_balance_error",
+                       "harvested_energy", "power_left", "power_right"]
     assert (by_name["impact_count"].type, by_name["impact_count"].variability) == ("Integer", "discrete")
     assert by_name["barrier_mode"].type == "Integer"
     assert (by_name["barrier_mode"].min, by_name["barrier_mode"].max) == ("0", "1")
+    assert (by_name["voltage_model"].type, by_name["voltage_model"].min, by_name["voltage_model"].max) == \
+        ("Integer", "0", "2")
     assert float(by_name["m"].min) == 0.0 and by_name["m"].max is None
     for name in ("voltage_rms", "average_power", "energy_dissipated", "deflection_left", "impact_count"):
         assert float(by_name[name].min) == 0.0, name

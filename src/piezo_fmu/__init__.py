@@ -6,10 +6,10 @@ metrics) is plain Python and numpy; it knows nothing of FMI.
 
 from .barrier import Barrier, derive_barrier
 from .metrics import Metrics, perfectibility
-from .parameters import DERIVED, EXPLICIT, Parameters, parameter_info
+from .parameters import CIRCUIT, COUPLED, DERIVED, EXPLICIT, QUASI_STATIC, Parameters, parameter_info
 from .simulator import EnergyLedger, Impact, Simulator, State
 
 __all__ = [
-    "Barrier", "DERIVED", "EXPLICIT", "EnergyLedger", "Impact", "Metrics", "Parameters", "Simulator",
+    "Barrier", "CIRCUIT", "COUPLED", "DERIVED", "EXPLICIT", "QUASI_STATIC", "EnergyLedger", "Impact", "Metrics", "Parameters", "Simulator",
     "State", "derive_barrier", "parameter_info", "perfectibility",
 ]

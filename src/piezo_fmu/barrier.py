@@ -1,8 +1,9 @@
 """The barrier: a clamped-free steel beam with one piezoelectric patch (MODEL.md section 4-5).
 
 Derives the tip-referred equivalents ``M_eq`` and ``K_eq`` (eqs. 22-23) from the first
-cantilever mode, and the quasi-static voltage gain ``k_V`` (eqs. 25-27, with the patch-average
-curvature of MODEL.md section 5).
+cantilever mode, the quasi-static voltage gain ``k_V`` (eqs. 25-27, with the patch-average
+curvature of MODEL.md section 5), and the patch as a circuit element: its capacitance ``C_p`` and
+electromechanical coupling ``chi`` (eqs. 20-21).
 """
 
 from __future__ import annotations
@@ -82,6 +83,10 @@ class Barrier:
     kappa_bar : 1/m^2, patch-average curvature per metre of tip deflection.
     omega : rad/s, first natural frequency of the barrier, ``sqrt(K_eq / M_eq)``.
     explicit : True when ``M_eq`` and ``K_eq`` were given rather than derived.
+    C_p : F, capacitance of the patch, ``eps33 W_p L_p / t_p``.
+    e31 : C/m^2 (N/(V m)), ``|d31| E_p``.
+    chi : N/V (C/m), coupling per unit tip deflection,
+        ``e31 W_p y_p |phi_1'(x2) - phi_1'(x1)| / phi_1(L)``: ``C_p V' + V / R = chi delta'``.
     """
 
     M_eq: float
@@ -98,6 +103,9 @@ class Barrier:
     kappa_bar: float
     omega: float
     explicit: bool
+    C_p: float = 0.0
+    e31: float = 0.0
+    chi: float = 0.0
 
 
 def derive_barrier(params: Parameters) -> Barrier:
@@ -126,12 +134,19 @@ def derive_barrier(params: Parameters) -> Barrier:
 
     # MODEL.md decision (where the strain is read): patch-average curvature per unit tip deflection.
     phi_L = float(mode_shape(L, L))
-    kappa_bar = float(mode_slope(x2, L) - mode_slope(params.x1, L)) / (params.L_p * phi_L)
+    slope_change = float(mode_slope(x2, L) - mode_slope(params.x1, L))
+    kappa_bar = slope_change / (params.L_p * phi_L)
     y_p = (params.t_b + params.t_p) / 2.0 - z_n
     k_V = params.g31 * params.E_p * params.L_p * y_p * abs(kappa_bar)
+    # The circuit (eqs. 20-21; MODEL.md section 5, decision "the electrode gap"): magnitudes, so
+    # that the voltage of the barrier in contact is positive while its deflection grows.
+    C_p = params.eps33 * params.W_p * params.L_p / params.t_p
+    e31 = abs(params.d31) * params.E_p
+    chi = e31 * params.W_p * y_p * abs(slope_change) / phi_L
 
     return Barrier(
         M_eq=M_eq, K_eq=K_eq, k_V=k_V, beta1=beta1, kappa1=first_mode_kappa(), eta1=eta1,
         phi2_patch=phi2_patch, EI_b=EI_b, EI_p=EI_p, z_n=z_n, y_p=y_p, kappa_bar=kappa_bar,
         omega=math.sqrt(K_eq / M_eq), explicit=params.barrier_mode == EXPLICIT,
+        C_p=C_p, e31=e31, chi=chi,
     )

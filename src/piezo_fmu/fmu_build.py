@@ -72,6 +72,8 @@ BASE_UNITS = {
     "V": {"kg": 1, "m": 2, "s": -3, "A": -1},
     "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2},
     "V.m/N": {"m": 2, "s": -1, "A": -1},
+    "m/V": {"kg": -1, "m": -1, "s": 3, "A": 1},
+    "F/m": {"kg": -1, "m": -3, "s": 4, "A": 2},
 }
 
 #: Fixed archive metadata (the earliest date a zip can hold; regular file, rw-r--r--).

@@ -96,11 +96,13 @@ OUTPUTS = (
              "Tip deflection of the right barrier (r = +d/2); 0 while not in contact",
              min=0.0, read=lambda core: core.sim.deflection(+1)),
     Variable("voltage_left", "Real", "output", "V",
-             "Voltage of the left barrier's piezoelectric patch (quasi-static, eqs. 25-28)",
-             min=0.0, read=lambda core: core.sim.voltage(-1)),
+             "Voltage of the left barrier's piezoelectric patch (voltage_model 0: quasi-static, eqs. 25-28, "
+             ">= 0; 1 and 2: across the load, signed)",
+             read=lambda core: core.sim.voltage(-1)),
     Variable("voltage_right", "Real", "output", "V",
-             "Voltage of the right barrier's piezoelectric patch (quasi-static, eqs. 25-28)",
-             min=0.0, read=lambda core: core.sim.voltage(+1)),
+             "Voltage of the right barrier's piezoelectric patch (voltage_model 0: quasi-static, eqs. 25-28, "
+             ">= 0; 1 and 2: across the load, signed)",
+             read=lambda core: core.sim.voltage(+1)),
     Variable("base_force", "Real", "output", "N",
              "Force the device exerts on its base (spring K and damper C of the main mass), along +x",
              read=lambda core: core.sim.base_force),
@@ -127,6 +129,16 @@ OUTPUTS = (
              "Energy ledger residual: energy now - (initial energy + work by the base - dissipated); "
              "0 to rounding",
              read=lambda core: core.energy.balance_error),
+    Variable("harvested_energy", "Real", "output", "J",
+             "Energy harvested in the loads of both barriers since the start, integral of V^2/R_load dt "
+             "(voltage_model 1 and 2; 0 under the quasi-static model 0, an open-circuit voltage)",
+             min=0.0, read=lambda core: core.energy.harvested),
+    Variable("power_left", "Real", "output", "W",
+             "Instantaneous power V^2/R_load into the left barrier's load (0 under voltage_model 0)",
+             min=0.0, read=lambda core: core.sim.power(-1)),
+    Variable("power_right", "Real", "output", "W",
+             "Instantaneous power V^2/R_load into the right barrier's load (0 under voltage_model 0)",
+             min=0.0, read=lambda core: core.sim.power(+1)),
 )
 
 #: The whole table, in value-reference order: parameters, then inputs, then outputs.

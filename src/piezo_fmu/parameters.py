@@ -14,6 +14,18 @@ from dataclasses import dataclass, field
 DERIVED = 0
 EXPLICIT = 1
 
+#: ``voltage_model`` values (MODEL.md section 5): the paper's quasi-static voltage ``V = k_V delta``;
+#: the patch capacitance and load as a circuit driven one way by the barrier (eqs. 20-21);
+#: the same circuit with ``chi V`` acting back on the barrier in contact.
+QUASI_STATIC = 0
+CIRCUIT = 1
+COUPLED = 2
+
+#: Under ``voltage_model = 2`` the electrical rate ``1 / (R_load C_p)`` may exceed the fastest
+#: mechanical rate of a contact by at most this factor: the coupled contact is integrated with
+#: brackets of ``THETA R_load C_p`` (``propagation.py``), so a contact costs about this many of them.
+MAX_COUPLED_STIFFNESS = 1e4
+
 #: The equivalent mass and stiffness printed in the paper (kg, N/m); see MODEL.md section 4.
 PRINTED_M_EQ = 0.0292
 PRINTED_K_EQ = 46.7753e6
@@ -50,7 +62,8 @@ def _p(default: float, unit: str, description: str, bound: Bound = POSITIVE):
 
 @dataclass(frozen=True)
 class Parameters:
-    """Every Table 1 quantity, the load, the initial conditions and the barrier mode.
+    """Every Table 1 quantity, the load, the initial conditions, the barrier mode, and the
+    patch's circuit constants with the voltage model (MODEL.md section 5).
 
     All values are SI. Construction validates every value and raises ``ValueError``
     naming the parameter, the value and the allowed range.
@@ -92,6 +105,16 @@ class Parameters:
     )
     M_eq: float = _p(PRINTED_M_EQ, "kg", "Equivalent tip mass of a barrier (explicit mode only)")
     K_eq: float = _p(PRINTED_K_EQ, "N/m", "Equivalent tip stiffness of a barrier (explicit mode only)")
+    # The patch as a circuit element (MODEL.md section 5, eqs. 20-21; voltage_model 1 and 2).
+    d31: float = _p(-274e-12, "m/V", "Piezoelectric strain constant d31 of the patch (its magnitude is used)", FINITE)
+    eps33: float = _p(25.55e-9, "F/m", "Permittivity eps33 of the patch at constant strain")
+    voltage_model: int = field(
+        default=QUASI_STATIC,
+        metadata={"unit": "1", "description": "0: quasi-static voltage k_V delta (the paper's, eqs. 25-28); "
+                                              "1: patch capacitance and load as a circuit, one-way; "
+                                              "2: circuit coupled back to the barrier in contact",
+                  "bound": Bound(QUASI_STATIC, COUPLED, lo_open=False, hi_open=False)},
+    )
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -99,6 +122,12 @@ class Parameters:
             if f.name == "barrier_mode":
                 if isinstance(value, bool) or value not in (DERIVED, EXPLICIT):
                     raise ValueError(f"barrier_mode = {value!r} is not allowed; allowed values are 0 (derived) or 1 (explicit)")
+                object.__setattr__(self, f.name, int(value))
+                continue
+            if f.name == "voltage_model":
+                if isinstance(value, bool) or value not in (QUASI_STATIC, CIRCUIT, COUPLED):
+                    raise ValueError(f"voltage_model = {value!r} is not allowed; allowed values are 0 (quasi-static), "
+                                     "1 (circuit, one-way) or 2 (circuit, coupled)")
                 object.__setattr__(self, f.name, int(value))
                 continue
             try:
@@ -123,11 +152,24 @@ class Parameters:
         # M_eq is part of M (MODEL.md section 3), so M must exceed it; checked here for both modes.
         from .barrier import derive_barrier  # local import: barrier depends on this module
 
-        m_eq = derive_barrier(self).M_eq
+        barrier = derive_barrier(self)
+        m_eq = barrier.M_eq
         if self.M <= m_eq:
             raise ValueError(
                 f"M = {self.M!r} kg must exceed the barrier tip mass M_eq = {m_eq:g} kg; "
                 f"allowed range ({m_eq:g}, inf) kg")
+        if self.voltage_model == COUPLED:
+            # The coupled contact is integrated exactly with brackets of THETA R_load C_p at most:
+            # bound the work of a contact rather than let a tiny load stall the run.
+            stiffness = barrier.K_eq + barrier.chi**2 / barrier.C_p
+            omega = math.sqrt(stiffness * (1.0 / (self.m + m_eq) + 1.0 / (self.M - m_eq)))
+            r_min = 1.0 / (MAX_COUPLED_STIFFNESS * omega * barrier.C_p)
+            if self.R_load < r_min:
+                raise ValueError(
+                    f"R_load = {self.R_load!r} Ohm is too small for voltage_model = 2: the circuit's rate "
+                    f"1/(R_load C_p) = {1.0 / (self.R_load * barrier.C_p):.3g} 1/s may exceed the contact's "
+                    f"{omega:.3g} rad/s by at most {MAX_COUPLED_STIFFNESS:g} times; allowed range "
+                    f"[{r_min:.6g}, inf) Ohm (voltage_model = 1 takes any load)")
 
     def replace(self, **changes) -> "Parameters":
         """A copy with some values changed, validated anew."""

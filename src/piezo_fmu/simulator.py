@@ -6,6 +6,12 @@ section 3). Each is propagated exactly (``propagation.py``); phase switches, the
 peaks that give the impact voltages, and the maxima of ``p`` that give the damping
 inclination are located as roots on the exact trajectory (``roots.py``). Nothing is stepped
 with a fixed step.
+
+The patch voltage follows ``params.voltage_model`` (MODEL.md section 5): 0, the paper's
+quasi-static ``V = k_V delta`` (no circuit state at all); 1, the patch capacitance and load as a
+circuit driven one way by the barrier; 2, the same circuit acting back on the barrier in contact.
+Under 1 and 2 each barrier has its own voltage, exact in closed form between contacts and on
+every contact bracket (``circuit.py``); under 2 it is also a column of the contact state.
 """
 
 from __future__ import annotations
@@ -18,8 +24,9 @@ from typing import NamedTuple
 import numpy as np
 
 from .barrier import derive_barrier
+from .circuit import Piece, decay, driven
 from .metrics import MetricAccumulators, Metrics
-from .parameters import Parameters
+from .parameters import COUPLED, Parameters
 from .propagation import PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers, primitive, primitive_of_square
 from .roots import bernstein, crossings
 
@@ -34,8 +41,9 @@ _ZERO = 1e-13
 _NOISE_ULPS = 64
 EPS = float(np.finfo(float).eps)
 
-# Columns of the deviation state x = (u, w, u', w', 1), with u = p - y(t), w = q - y(t).
-U, W, DU, DW, ONE = range(5)
+# Columns of the deviation state x = (u, w, u', w', 1), with u = p - y(t), w = q - y(t); in
+# contact under voltage_model = 2, the patch voltage V of the barrier in contact follows.
+U, W, DU, DW, ONE, VOLT = range(6)
 
 
 class State(NamedTuple):
@@ -62,7 +70,9 @@ class Impact:
     ``time`` (s) is the onset, ``side`` +1 (right) or -1 (left), ``rel_velocity`` (m/s) the
     relative velocity ``q' - p'`` at onset before the tip mass is captured,
     ``max_deflection`` (m) the peak barrier tip deflection, ``voltage`` (V) the impact voltage
-    ``V_i = k_V max_deflection``, ``duration`` (s) the contact time (NaN while the contact lasts).
+    ``V_i``: ``k_V max_deflection`` under ``voltage_model = 0``, the peak ``|V|`` across the load
+    during the contact (ends included) under 1 and 2 (NaN while the contact lasts);
+    ``duration`` (s) the contact time (NaN while the contact lasts).
     ``dp_*``/``dq_*`` (m/s) are the absolute velocities just before and after the onset and the
     separation switches, and ``capture_loss``/``release_loss`` (J) the plastic losses there.
     """
@@ -92,6 +102,13 @@ class EnergyLedger(NamedTuple):
     accumulate: viscous dissipation in ``C`` and ``C_eq``, ``plastic`` losses of tip-mass
     capture and release, and ``work_base``, the work the base did on the device (including
     jumps of a base displacement set by the host). ``initial`` is the energy at the start.
+
+    The circuit (``voltage_model`` 1 and 2; all zero under 0, which has no circuit):
+    ``electrical`` is the energy now stored in the two patch capacitances, ``0.5 C_p V^2``;
+    ``harvested_left``/``harvested_right`` accumulate ``int V^2 / R dt`` of each barrier;
+    ``converted`` accumulates ``int chi V delta' dt``, the power the barrier in contact feeds the
+    circuit; ``electrical_work`` is the part of it the mechanics paid: ``converted`` under the
+    coupled model 2, 0 under the one-way model 1 (which supplies it without acting back).
     """
 
     kinetic: float
@@ -102,11 +119,26 @@ class EnergyLedger(NamedTuple):
     plastic: float
     work_base: float
     initial: float
+    electrical: float = 0.0
+    harvested_left: float = 0.0
+    harvested_right: float = 0.0
+    converted: float = 0.0
+    electrical_work: float = 0.0
 
     @property
     def total(self) -> float:
         """Present mechanical energy, J."""
         return self.kinetic + self.potential_K + self.potential_Keq
+
+    @property
+    def harvested(self) -> float:
+        """Energy harvested in the loads of both barriers so far, J."""
+        return self.harvested_left + self.harvested_right
+
+    @property
+    def electrical_balance_error(self) -> float:
+        """``electrical + harvested - converted``, J: the circuit's own balance, zero for exact bookkeeping."""
+        return self.electrical + self.harvested - self.converted
 
     @property
     def dissipated(self) -> float:
@@ -115,11 +147,11 @@ class EnergyLedger(NamedTuple):
 
     @property
     def balance_error(self) -> float:
-        """``total - (initial + work_base - dissipated)``, J: zero for exact bookkeeping."""
-        return self.total - (self.initial + self.work_base - self.dissipated)
+        """``total - (initial + work_base - dissipated - electrical_work)``, J: zero for exact bookkeeping."""
+        return self.total - (self.initial + self.work_base - self.dissipated - self.electrical_work)
 
 
-_MAXIMUM, _PEAK = 0, 1
+_MAXIMUM, _PEAK, _VOLTAGE_PEAK = 0, 1, 2
 
 
 @dataclass
@@ -161,6 +193,12 @@ class _Bracket:
         for name in ("c", "delta", "ledger", "powers"):
             if data[name] is not None:
                 data[name] = np.array(data[name], dtype=float)
+        if data["delta"] is not None:
+            # Made as a column of the (terms, 3) matrix of event functions: restored with the same
+            # strides, so that the dot products that evaluate it round alike (bit-identical peaks).
+            columns = np.zeros((data["delta"].size, 3))
+            columns[:, 0] = data["delta"]
+            data["delta"] = columns[:, 0]
         data["events"] = [(float(s), int(k)) for s, k in data["events"]]
         return cls(**data)
 
@@ -200,10 +238,29 @@ class Simulator:
         self._M_contact = M - M_eq
         self._m_contact = m + M_eq
         self._free = LinearPhase(_free_matrix(M, K, C))
-        self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side))
+        #: The voltage model: 0 quasi-static (no circuit state), 1 circuit one-way, 2 coupled.
+        self._vm = params.voltage_model
+        #: The voltage of the barrier in contact on the open bracket (voltage_model 1 and 2).
+        self._piece: Piece | None = None
+        coupling = None
+        if self._vm == COUPLED:
+            coupling = (self.barrier.chi, self.barrier.C_p, params.R_load)
+        self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side,
+                                                           coupling))
                          for side in (RIGHT, LEFT)}
         self._zero = _ZERO * params.d
-        self._functionals = {side: _event_functionals(side, params.d) for side in (FREE, RIGHT, LEFT)}
+        self._functionals = {side: _event_functionals(side, params.d, self._contact[RIGHT].A.shape[0] if side else 5)
+                             for side in (FREE, RIGHT, LEFT)}
+        if self._vm:
+            self._RC = params.R_load * self.barrier.C_p
+            # Per barrier (index (side + 1) // 2: left 0, right 1): the voltage booked at time
+            # _circuit_t and the energy harvested up to then; the peak |V| of the open contact,
+            # the converted energy booked, and the voltage on the open contact bracket.
+            self._circuit_V = [0.0, 0.0]
+            self._circuit_t = [float(t0), float(t0)]
+            self._circuit_harvested = [0.0, 0.0]
+            self._circuit_converted = 0.0
+            self._circuit_peak = 0.0
 
         self.t = float(t0)
         self._p, self._dp, self._q, self._dq = params.p0, params.dp0, params.q0, params.dq0
@@ -236,8 +293,37 @@ class Simulator:
         return max(0.0, side * (self._q - self._p) - self.params.d / 2)
 
     def voltage(self, side: int) -> float:
-        """Quasi-static patch voltage (V) of the barrier on ``side``: ``k_V`` times its deflection."""
-        return self.barrier.k_V * self.deflection(side)
+        """Patch voltage (V) of the barrier on ``side`` (+1 right, -1 left).
+
+        ``voltage_model = 0``: quasi-static, ``k_V`` times its deflection (0 when not in contact).
+        1 and 2: the voltage across the load, exact; it can be negative (while the deflection
+        falls) and decays through the load between contacts.
+        """
+        if not self._vm:
+            return self.barrier.k_V * self.deflection(side)
+        return self._circuit_now(side)[0]
+
+    def power(self, side: int) -> float:
+        """Instantaneous power (W) into the load of the barrier on ``side``, ``V^2 / R``.
+
+        0 under ``voltage_model = 0``: the quasi-static voltage is an open-circuit voltage, no
+        current flows and nothing is harvested (see ``Simulator.energy``).
+        """
+        if not self._vm:
+            return 0.0
+        v = self._circuit_now(side)[0]
+        return v * v / self.params.R_load
+
+    def _circuit_now(self, side: int) -> tuple[float, float]:
+        """Voltage (V) of the barrier on ``side`` now, and its energy harvested so far (J)."""
+        i = (side + 1) // 2
+        br = self._bracket
+        if self._piece is not None and side == self._side:
+            # The barrier in contact, on the open bracket (booked at its start).
+            return (self._piece.value(br.s, br.powers),
+                    self._circuit_harvested[i] + self._piece.harvested(br.s, br.powers))
+        v, harvested = decay(self._circuit_V[i], self.t - self._circuit_t[i], self._RC, self.barrier.C_p)
+        return v, self._circuit_harvested[i] + harvested
 
     @property
     def base_force(self) -> float:
@@ -274,10 +360,23 @@ class Simulator:
         a = self._accounts
         br = self._bracket
         open_C, open_Ceq, open_base = br.powers @ br.ledger if br else (0.0, 0.0, 0.0)
+        if not self._vm:
+            return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
+                                potential_Keq=potential_Keq, dissipated_C=a.dissipated_C + open_C,
+                                dissipated_Ceq=a.dissipated_Ceq + open_Ceq, plastic=a.plastic,
+                                work_base=a.work_base + open_base, initial=a.initial)
+        v_left, harvested_left = self._circuit_now(LEFT)
+        v_right, harvested_right = self._circuit_now(RIGHT)
+        converted = self._circuit_converted
+        if self._piece is not None:
+            converted += self._piece.converted(br.s, br.powers)
         return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
                             potential_Keq=potential_Keq, dissipated_C=a.dissipated_C + open_C,
                             dissipated_Ceq=a.dissipated_Ceq + open_Ceq, plastic=a.plastic,
-                            work_base=a.work_base + open_base, initial=a.initial)
+                            work_base=a.work_base + open_base, initial=a.initial,
+                            electrical=0.5 * self.barrier.C_p * (v_left * v_left + v_right * v_right),
+                            harvested_left=harvested_left, harvested_right=harvested_right,
+                            converted=converted, electrical_work=converted if self._vm == COUPLED else 0.0)
 
     @property
     def bracket_lengths(self) -> dict[str, float]:
@@ -347,7 +446,13 @@ class Simulator:
         side, y, v = self._side, self._y, self._v
         phase = self._free if side == FREE else self._contact[side]
         x = np.array([self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0])
-        c = phase.coefficients(x, phase.h)
+        if side != FREE and self._vm:
+            if self._vm == COUPLED:
+                x = np.append(x, self._circuit_V[(side + 1) // 2])
+            c = phase.coefficients(x, phase.h)
+            self._piece = self._contact_piece(c, phase.h, side)
+        else:
+            c = phase.coefficients(x, phase.h)
         br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
         # Event functions as linear maps of the state: columns of G, Bernstein rows of B, and
         # the rounding level of each (a few ulp of the state terms that make it up).
@@ -363,10 +468,20 @@ class Simulator:
             g, b = G[:, j], B[j]
             if abs(g[0]) <= max(self._zero, noise[j]):
                 # At a switch the function that fired is zero to rounding: its sign just after
-                # the start is that of its first derivative that is not.
+                # the start is that of the relative velocity towards the barrier. When that is
+                # zero to rounding too (a body coming to rest on a barrier), the relative
+                # acceleration without the barrier's force decides. Both tests read the same
+                # state the same way in either phase, so the phases cannot hand over to each
+                # other forever at one instant.
                 g = g.copy()
                 g[0] = 0.0
-                if _start_sign(g, noise[j]) == direction:
+                barrier = targets[j] if side == FREE else side
+                rate = barrier * (x[DW] - x[DU])
+                if abs(rate) > _NOISE_ULPS * EPS * (abs(x[DW]) + abs(x[DU])):
+                    start = int(np.sign(rate))
+                else:
+                    start = self._approach_sign(x, barrier)
+                if start == direction:
                     br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
                 b = bernstein(g)
@@ -378,6 +493,8 @@ class Simulator:
         if side != FREE:
             br.delta = G[:, 0]
             events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1], noise[1]) if s <= br.s_switch]
+            if self._piece is not None:
+                events += [(s, _VOLTAGE_PEAK) for s in self._piece.peaks(min(br.s_switch, 1.0))]
             events.sort()
         br.events = events
         return br
@@ -397,12 +514,28 @@ class Simulator:
             P[:, 2] = primitive(p.K * c[:, U] + p.C * c[:, DU], -v * tau)
         return P
 
+    def _contact_piece(self, c: np.ndarray, tau: float, side: int) -> Piece:
+        """The voltage of the barrier on ``side`` over a contact bracket (``circuit.py``)."""
+        chi, R = self.barrier.chi, self.params.R_load
+        D = side * (c[:, DW] - c[:, DU])  # delta' (m/s)
+        if self._vm == COUPLED:
+            return Piece(c[:, VOLT].copy(), 0.0, tau / self._RC, D, tau, R, chi)
+        return driven(self._circuit_V[(side + 1) // 2], D, tau / self._RC, tau * chi / self.barrier.C_p, tau, R, chi)
+
+    def _approach_sign(self, x: np.ndarray, side: int) -> int:
+        """Sign of the relative acceleration of the impact mass towards the barrier on ``side``
+        from the main spring and damper alone (the barrier's force left out), at state ``x``."""
+        main_acceleration = -(self.params.K * x[U] + self.params.C * x[DU])
+        return int(np.sign(-side * main_acceleration))
+
     def _non_terminal_event(self, br: "_Bracket", s: float, kind: int) -> None:
         if kind == _MAXIMUM:
             p = float(evaluate(br.c[:, U], s)) + br.base + br.v * s * br.tau
             self._record_maximum(br.t_start + s * br.tau, p)
-        else:
+        elif kind == _PEAK:
             self._open.max_deflection = max(self._open.max_deflection, float(evaluate(br.delta, s)))
+        else:
+            self._circuit_peak = max(self._circuit_peak, abs(self._piece.value(s, powers(s))))
 
     def _close_bracket(self) -> None:
         """Book the ledger of the present bracket up to where the state stands, and drop it.
@@ -420,6 +553,15 @@ class Simulator:
         a.dissipated_Ceq += dissipated_Ceq
         a.work_base += work_base
         self._bracket = None
+        if self._vm and self._piece is not None:
+            # Book the voltage of the barrier in contact where the state stands.
+            piece, i = self._piece, (self._side + 1) // 2
+            v = piece.value(br.s, br.powers)
+            self._circuit_V[i], self._circuit_t[i] = v, self.t
+            self._circuit_harvested[i] += piece.harvested(br.s, br.powers)
+            self._circuit_converted += piece.converted(br.s, br.powers)
+            self._circuit_peak = max(self._circuit_peak, abs(v))
+            self._piece = None
 
     def _record_maximum(self, t: float, p: float) -> None:
         self._metrics = None
@@ -439,13 +581,23 @@ class Simulator:
                                 dp_after=dp, dq_after=dq_after, capture_loss=loss)
             self._acc.impact_started()
             self._dq = dq_after
+            if self._vm:
+                # The barrier's voltage decayed since it was booked; the contact starts from it.
+                i = (to + 1) // 2
+                v, harvested = decay(self._circuit_V[i], self.t - self._circuit_t[i], self._RC, self.barrier.C_p)
+                self._circuit_V[i], self._circuit_t[i] = v, self.t
+                self._circuit_harvested[i] += harvested
+                self._circuit_peak = abs(v)
         else:
             M = self.params.M
             dp_after = (self._M_contact * dp + M_eq * dq) / M
             loss = 0.5 * self._M_contact * M_eq / M * (dp - dq) ** 2
             impact = self._open
             impact.duration = self.t - impact.time
-            impact.voltage = self.barrier.k_V * impact.max_deflection
+            if self._vm:
+                impact.voltage = self._circuit_peak  # peak |V| over the contact, ends included
+            else:
+                impact.voltage = self.barrier.k_V * impact.max_deflection
             impact.dp_sep_before, impact.dq_sep_before = dp, dq
             impact.dp_sep_after, impact.dq_sep_after = dp_after, dq
             impact.release_loss = loss
@@ -462,7 +614,7 @@ class Simulator:
     # ------------------------------------------------------------------ saving state
     def snapshot(self) -> dict:
         """The full internal state as a JSON-safe dict (floats, ints, lists)."""
-        return {
+        data = {
             "t": self.t, "p": self._p, "dp": self._dp, "q": self._q, "dq": self._dq,
             "side": self._side, "y": self._y, "v": self._v,
             "accounts": asdict(self._accounts), "metrics": self._acc.to_dict(),
@@ -471,6 +623,12 @@ class Simulator:
             "maxima": [list(m) for m in self._maxima],
             "bracket": self._bracket.to_dict() if self._bracket else None,
         }
+        if self._vm:
+            # The voltage on an open contact bracket is rebuilt from the bracket and the booked V.
+            data["circuit"] = {"V": list(self._circuit_V), "t": list(self._circuit_t),
+                               "harvested": list(self._circuit_harvested),
+                               "converted": self._circuit_converted, "peak": self._circuit_peak}
+        return data
 
     @classmethod
     def restore(cls, params: Parameters, snapshot: dict, log_limit: int | None = None) -> "Simulator":
@@ -486,17 +644,29 @@ class Simulator:
         sim._impacts.extend(Impact(**i) for i in snapshot["impacts"])
         sim._maxima.extend(tuple(m) for m in snapshot["maxima"])
         sim._bracket = _Bracket.from_dict(snapshot["bracket"]) if snapshot["bracket"] else None
+        if sim._vm:
+            if "circuit" not in snapshot:
+                raise ValueError(f"the snapshot has no circuit state: it was saved under voltage_model = 0, "
+                                 f"not {params.voltage_model}")
+            circuit = snapshot["circuit"]
+            sim._circuit_V = [float(v) for v in circuit["V"]]
+            sim._circuit_t = [float(t) for t in circuit["t"]]
+            sim._circuit_harvested = [float(h) for h in circuit["harvested"]]
+            sim._circuit_converted = float(circuit["converted"])
+            sim._circuit_peak = float(circuit["peak"])
+            if sim._bracket is not None and sim._side != FREE:
+                sim._piece = sim._contact_piece(sim._bracket.c, sim._bracket.tau, sim._side)
         return sim
 
 
-def _event_functionals(side: int, d: float) -> np.ndarray:
-    """Event functions of a phase as columns acting on x = (u, w, u', w', 1).
+def _event_functionals(side: int, d: float, n: int = 5) -> np.ndarray:
+    """Event functions of a phase as columns acting on x = (u, w, u', w', 1) (and V, n = 6).
 
     Free flight: ``r - d/2``, ``-r - d/2`` (onsets, right and left) and ``p'``; contact on
     ``side``: ``delta`` (separation), ``delta'`` (its peak) and ``p'``. The base velocity in
     ``p' = u' + v`` is filled in per bracket.
     """
-    L = np.zeros((5, 3))
+    L = np.zeros((n, 3))
     if side == FREE:
         L[[U, W], 0] = [-1.0, 1.0]
         L[[U, W], 1] = [1.0, -1.0]
@@ -507,12 +677,6 @@ def _event_functionals(side: int, d: float) -> np.ndarray:
         L[[DU, DW], 1] = [-side, side]
     L[DU, 2] = 1.0
     return L
-
-
-def _start_sign(g: np.ndarray, noise: float) -> int:
-    """Sign of a polynomial just after s = 0: that of its first coefficient above ``noise``."""
-    above = np.nonzero(np.abs(g) > noise)[0]
-    return int(np.sign(g[above[0]])) if above.size else 0
 
 
 def _check_finite(**values: float) -> None:
@@ -531,16 +695,25 @@ def _free_matrix(M: float, K: float, C: float) -> np.ndarray:
     return A
 
 
-def _contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: float, d: float, side: int) -> np.ndarray:
+def _contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: float, d: float, side: int,
+                    coupling: tuple[float, float, float] | None = None) -> np.ndarray:
     """Contact with the barrier on ``side`` (MODEL.md section 3) on x = (u, w, u', w', 1).
 
     ``s F = K_eq (w - u) + C_eq (w' - u') - s K_eq d/2`` acts on the main body (mass ``M1``)
-    and its opposite on the impact body (mass ``m1``).
+    and its opposite on the impact body (mass ``m1``). With ``coupling = (chi, C_p, R)``
+    (``voltage_model = 2``) the state is x = (u, w, u', w', 1, V): the patch voltage adds
+    ``chi V`` to the contact force ``F`` and obeys ``C_p V' + V / R = chi delta'``.
     """
-    force = np.zeros(5)
+    n = 5 if coupling is None else 6
+    force = np.zeros(n)
     force[[U, W, DU, DW]] = [-K_eq, K_eq, -C_eq, C_eq]
     force[ONE] = -side * K_eq * d / 2
-    A = np.zeros((5, 5))
+    A = np.zeros((n, n))
+    if coupling is not None:
+        chi, C_p, R = coupling
+        force[VOLT] = side * chi
+        A[VOLT, [DU, DW]] = [-side * chi / C_p, side * chi / C_p]
+        A[VOLT, VOLT] = -1.0 / (R * C_p)
     A[U, DU] = A[W, DW] = 1.0
     A[DU] = force / M1
     A[DU, U] -= K / M1
