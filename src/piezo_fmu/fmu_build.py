@@ -28,6 +28,7 @@ import argparse
 import hashlib
 import io
 import shutil
+import struct
 import sys
 import tempfile
 import uuid
@@ -207,11 +208,62 @@ def deterministic_zip(files: dict[str, bytes]) -> bytes:
     return buffer.getvalue()
 
 
+#: The linux64 binary of the FMU, whose exit-time function table :func:`drop_exit_unload` mends.
+LINUX_BINARY = f"binaries/linux64/{MODEL_IDENTIFIER}.so"
+
+
+def _elf_sections(data: bytes) -> dict:
+    shoff, = struct.unpack_from("<Q", data, 0x28)
+    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x3A)
+    heads = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + i * shentsize) for i in range(shnum)]
+    names = heads[shstrndx][4]
+    return {data[names + h[0]:data.index(b"\0", names + h[0])].decode(): h for h in heads}
+
+
+def drop_exit_unload(binary: bytes) -> bytes:
+    """pythonfmu 0.7.0's linux64 binary with ``onLibraryUnload`` taken out of its ``.fini_array``.
+
+    The binary keeps its interpreter guard in a static ``std::shared_ptr<PyState>`` and resets it
+    again from ``onLibraryUnload``, a ``__attribute__((destructor))`` function. At process exit
+    ``exit()`` runs the static's destructor first (an atexit handler), then the loader's
+    ``_dl_fini`` runs ``onLibraryUnload``, which releases the freed control block a second time: a
+    use-after-free that corrupts the heap (valgrind; Dask workers abort with "free(): corrupted
+    unsorted chunks"). The static's destructor does all the work, at exit and at ``dlclose``, so
+    the entry is dropped: ``DT_FINI_ARRAYSZ`` shrinks by one slot (the entry is the array's last,
+    and the array runs last to first). Anything else in the table is an error.
+    """
+    data = bytearray(binary)
+    secs = _elf_sections(binary)
+    symtab, strtab = secs[".symtab"], secs[".strtab"]
+    unload = None
+    for off in range(symtab[4], symtab[4] + symtab[5], 24):
+        name, _, _, _, value, _ = struct.unpack_from("<IBBHQQ", binary, off)
+        if b"onLibraryUnload" in binary[strtab[4] + name:binary.index(b"\0", strtab[4] + name)]:
+            unload = value
+    fini, rela, dynamic = secs[".fini_array"], secs[".rela.dyn"], secs[".dynamic"]
+    entries = {}
+    for off in range(rela[4], rela[4] + rela[5], 24):
+        where, info, addend = struct.unpack_from("<QQq", binary, off)
+        if info & 0xFFFFFFFF == 8 and fini[3] <= where < fini[3] + fini[5]:  # R_X86_64_RELATIVE
+            entries[(where - fini[3]) // 8] = addend
+    for off in range(dynamic[4], dynamic[4] + dynamic[5], 16):
+        tag, size = struct.unpack_from("<qQ", binary, off)
+        if tag == 28:  # DT_FINI_ARRAYSZ
+            last = size // 8 - 1
+            if unload is None or entries.get(last) != unload:
+                raise ValueError(f"unexpected exit functions {entries} (onLibraryUnload at {unload}): "
+                                 "not the pythonfmu 0.7.0 binary this mends")
+            struct.pack_into("<qQ", data, off, tag, size - 8)
+            return bytes(data)
+    raise ValueError("the binary has no DT_FINI_ARRAYSZ")
+
+
 def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
     """The reproducible FMU bytes made from a raw pythonfmu build."""
     with zipfile.ZipFile(raw_fmu) as archive:
         files = {name: archive.read(name) for name in archive.namelist()
                  if not name.endswith("/") and "__pycache__" not in name and not name.endswith(".pyc")}
+    files[LINUX_BINARY] = drop_exit_unload(files[LINUX_BINARY])
     root = complete_model_description(files["modelDescription.xml"], variables)
     guid = content_guid(files, root)
     root.set("guid", guid)

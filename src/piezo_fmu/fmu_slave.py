@@ -172,6 +172,9 @@ class CoreView:
 
 
 _READERS = tuple(spec.read for spec in OUTPUTS)
+#: Brackets one communication step may need at the least (a few minutes of CPU): a longer step is
+#: refused at once rather than left to run for hours in the host.
+MAX_BRACKETS_PER_STEP = 1e7
 #: Output values before the core exists (bad start values): NaN, and 0 for the Integer.
 _NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in OUTPUTS)
 
@@ -265,7 +268,7 @@ class PiezoImpactDamper(Fmi2Slave):
             try:
                 params = Parameters(**self._values)
                 self._sim = Simulator(params, y0=self._inputs["base_displacement"],
-                                      v0=self._inputs["base_velocity"], t0=self._start_time)
+                                      v0=self._inputs["base_velocity"], t0=self._start_time, log_limit=0)
             except Exception as error:  # noqa: BLE001 - reported through FMI, never raised
                 self._fault = f"invalid start values: {error}"
         return self._sim
@@ -288,6 +291,11 @@ class PiezoImpactDamper(Fmi2Slave):
             return self._fail("do_step is only allowed after fmi2ExitInitializationMode")
         if not (step_size > 0.0 and math.isfinite(step_size)):
             return self._fail(f"communication step size = {step_size!r} s must be finite and > 0")
+        longest = max(sim.bracket_lengths.values())
+        if step_size > MAX_BRACKETS_PER_STEP * longest:
+            return self._fail(f"communication step size = {step_size!r} s needs at least {step_size / longest:.3g} "
+                              f"brackets of the integrator (the longest is {longest:.3g} s); at most "
+                              f"{MAX_BRACKETS_PER_STEP:g} are allowed in one step: use shorter steps")
         t = sim.t
         if not abs(current_time - t) <= 1e-12 * max(1.0, abs(t)):
             return self._fail(f"the step starts at t = {current_time!r} s but the FMU is at t = {t!r} s; "
@@ -325,5 +333,5 @@ class PiezoImpactDamper(Fmi2Slave):
         self._start_time, self._stepping = state["start_time"], state["stepping"]
         self._fault, self._sim, self._stale, self._outputs = state["fault"], None, True, None
         if state["core"] is not None:
-            self._sim = Simulator.restore(Parameters(**self._values), state["core"])
+            self._sim = Simulator.restore(Parameters(**self._values), state["core"], log_limit=0)
             self._stale = False

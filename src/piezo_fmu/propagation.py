@@ -23,6 +23,11 @@ import numpy as np
 ORDER = 28
 #: Bracket length times the spectral radius of ``A``: each mode turns by at most THETA radians.
 THETA = 2.0
+#: Longest bracket (s) whatever ``A``: ``MAX_BRACKET**ORDER`` is far inside double range.
+MAX_BRACKET = 1e3
+#: Shortest bracket (s) a phase may need: beyond, ``A**ORDER / ORDER!`` overflows (near 2e-12 s),
+#: and the FMU's time grid (whole nanoseconds) could not resolve the motion anyway.
+MIN_BRACKET = 1e-9
 
 _K = np.arange(ORDER + 1)
 #: Coefficients of a bracket polynomial.
@@ -44,8 +49,9 @@ class LinearPhase:
     def __init__(self, A: np.ndarray):
         self.A = np.asarray(A, dtype=float)
         rho = float(np.max(np.abs(np.linalg.eigvals(self.A))))
-        #: s, the longest bracket: each mode turns by at most THETA rad within it.
-        self.h = THETA / rho if rho > 0 else math.inf
+        #: s, the longest bracket: each mode turns by at most THETA rad within it, and no longer
+        #: than MAX_BRACKET, so that ``tau**ORDER`` stays finite for a phase that barely moves.
+        self.h = THETA / rho if rho > THETA / MAX_BRACKET else MAX_BRACKET
         n = self.A.shape[0]
         terms = np.empty((ORDER + 1, n, n))
         terms[0] = np.eye(n)

@@ -27,7 +27,7 @@ from .barrier import derive_barrier
 from .circuit import Piece, decay, driven
 from .metrics import MetricAccumulators, Metrics
 from .parameters import COUPLED, Parameters
-from .propagation import PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers, primitive, primitive_of_square
+from .propagation import MIN_BRACKET, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers, primitive, primitive_of_square
 from .roots import bernstein, crossings
 
 FREE = 0
@@ -248,6 +248,7 @@ class Simulator:
         self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side,
                                                            coupling))
                          for side in (RIGHT, LEFT)}
+        _check_time_scales(params, self._free, self._contact[RIGHT])
         self._zero = _ZERO * params.d
         self._functionals = {side: _event_functionals(side, params.d, self._contact[RIGHT].A.shape[0] if side else 5)
                              for side in (FREE, RIGHT, LEFT)}
@@ -268,7 +269,16 @@ class Simulator:
         self._y, self._v = float(y0), float(v0)
         self._bracket: _Bracket | None = None
         self._accounts = _Accounts()
-        self._accounts.initial = self.energy.total
+        try:
+            self._accounts.initial = self.energy.total
+        except OverflowError:  # float ** overflows with an exception, * with inf
+            self._accounts.initial = math.inf
+        if not math.isfinite(self._accounts.initial):
+            big = {name: value for name, value in (("p0", params.p0), ("q0", params.q0), ("dp0", params.dp0),
+                                                   ("dq0", params.dq0), ("y0", y0)) if abs(value) > 1e100}
+            raise ValueError(f"{', '.join(f'{k} = {v!r}' for k, v in big.items()) or 'the start'}: the initial energy "
+                             "overflows double precision; allowed range: values whose energy stays finite "
+                             "(|displacements| and |velocities| well below 1e150)")
         self._acc = MetricAccumulators()
         self._metrics: Metrics | None = None
         self._open: Impact | None = None
@@ -400,7 +410,14 @@ class Simulator:
             self._close_bracket()
             if y != self._y:
                 # The host moved the base end of the spring: that work enters the ledger.
-                self._accounts.work_base += 0.5 * self.params.K * ((self._p - y) ** 2 - (self._p - self._y) ** 2)
+                try:
+                    jump = 0.5 * self.params.K * ((self._p - y) ** 2 - (self._p - self._y) ** 2)
+                except OverflowError:  # float ** overflows with an exception, * with inf
+                    jump = math.inf
+                if not math.isfinite(jump):
+                    raise ValueError(f"y = {y!r} m: the base displacement puts an energy beyond double precision in the "
+                                     "spring; allowed range: |y - p| well below 1e150 m")
+                self._accounts.work_base += jump
             self._y, self._v = float(y), float(v)
         instant_switches = 0
         while True:
@@ -453,6 +470,11 @@ class Simulator:
             self._piece = self._contact_piece(c, phase.h, side)
         else:
             c = phase.coefficients(x, phase.h)
+        if not np.isfinite(c).all():
+            # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
+            raise ValueError(f"y = {y!r} m, v = {v!r} m/s at t = {self.t!r} s: the state (p = {self._p!r} m, "
+                             f"q = {self._q!r} m, p' = {self._dp!r} m/s, q' = {self._dq!r} m/s) overflows double "
+                             "precision on the next bracket; allowed range: base and state well below 1e150")
         br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
         # Event functions as linear maps of the state: columns of G, Bernstein rows of B, and
         # the rounding level of each (a few ulp of the state terms that make it up).
@@ -677,6 +699,17 @@ def _event_functionals(side: int, d: float, n: int = 5) -> np.ndarray:
         L[[DU, DW], 1] = [-side, side]
     L[DU, 2] = 1.0
     return L
+
+
+def _check_time_scales(params: Parameters, free: LinearPhase, contact: LinearPhase) -> None:
+    """Refuse a damper whose fastest mode is beyond what the integrator can represent."""
+    for name, phase in (("free flight", free), ("contact", contact)):
+        if not (phase.h >= MIN_BRACKET and np.isfinite(phase._terms).all()):
+            raise ValueError(
+                f"M = {params.M!r} kg, K = {params.K!r} N/m, C = {params.C!r} N.s/m, m = {params.m!r} kg, "
+                f"C_eq = {params.C_eq!r} N.s/m (and the barrier's K_eq, M_eq): the {name} phase turns by 2 rad in "
+                f"{phase.h:.3g} s; allowed range: at least {MIN_BRACKET:g} s (a stiffness to mass or damping to "
+                "mass ratio below about 1e18)")
 
 
 def _check_finite(**values: float) -> None:
