@@ -62,22 +62,47 @@ def _run_in_worker(index: int, values: dict, stop_time: float, step: float) -> d
 
 
 class ProcessPool:
-    """Points run in ``jobs`` local processes, each with its own FMU instance."""
+    """Points run in ``jobs`` local processes, each with its own FMU instance.
+
+    A worker that dies (killed, out of memory) breaks the pool and loses the points in flight;
+    the pool is then started anew and those points run again, so each point is still recorded
+    exactly once. After :attr:`MAX_RESTARTS` such breaks the sweep stops (``--resume`` goes on).
+    """
+
+    #: Pools started anew after a worker died, before the sweep gives up.
+    MAX_RESTARTS = 3
 
     def __init__(self, model: FmuModel, unzipdir: str, jobs: int):
         self.jobs = jobs
         self.description = f"process pool, {jobs} worker{'s' if jobs != 1 else ''}"
-        self._executor = concurrent.futures.ProcessPoolExecutor(
-            max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-            initializer=_init_worker, initargs=(str(model.path), unzipdir))
+        self._pool_arguments = dict(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                    initializer=_init_worker, initargs=(str(model.path), unzipdir))
+        self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
+        self.restarts = 0
 
     def run(self, todo: Iterable[tuple]) -> Iterator[tuple]:
         """Run ``(tag, index, values, stop_time, step)`` items; yield ``(tag, record)`` as each
-        point finishes."""
-        futures = {self._executor.submit(_run_in_worker, index, values, stop_time, step): tag
-                   for tag, index, values, stop_time, step in todo}
-        for future in concurrent.futures.as_completed(futures):
-            yield futures[future], future.result()
+        point finishes, each exactly once, across worker deaths."""
+        remaining = {(item[0], item[1]): item for item in todo}
+        while remaining:
+            futures = {self._executor.submit(_run_in_worker, index, values, stop_time, step): (tag, index)
+                       for tag, index, values, stop_time, step in remaining.values()}
+            try:
+                for future in concurrent.futures.as_completed(futures):
+                    record = future.result()
+                    del remaining[futures[future]]
+                    yield futures[future][0], record
+            except concurrent.futures.process.BrokenProcessPool:
+                if self.restarts >= self.MAX_RESTARTS:
+                    raise
+                self.restarts += 1
+                # Points that finished before the break are kept; the rest run in a new pool.
+                for future, key in futures.items():
+                    if key in remaining and future.done() and not future.cancelled() and future.exception() is None:
+                        del remaining[key]
+                        yield key[0], future.result()
+                self._executor.shutdown(wait=False, cancel_futures=True)
+                self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
 
     def close(self, cancel: bool = False) -> None:
         if cancel:
