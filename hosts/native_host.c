@@ -38,6 +38,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "fmi2FunctionTypes.h"
 
@@ -69,6 +70,17 @@ typedef struct {
     double *values;       /* nrows * ncols, row-major */
 } InputTable;
 
+/* Leave the process without running exit-time destructors: a pythonfmu binary that started its own
+ * interpreter finalizes it then (Py_Finalize, on its own thread), which crashes now and then in
+ * scipy's _uarray module (a use-after-free in its module teardown), and the binary's fini function
+ * releases a static shared_ptr that its exit handler has already destroyed. All output is flushed
+ * first; the operating system reclaims the rest. */
+static void leave(int status)
+{
+    fflush(NULL);
+    _exit(status);
+}
+
 static void die(const char *fmt, ...)
 {
     va_list ap;
@@ -77,7 +89,7 @@ static void die(const char *fmt, ...)
     vfprintf(stderr, fmt, ap);
     fprintf(stderr, "\n");
     va_end(ap);
-    exit(1);
+    leave(1);
 }
 
 static char *read_file(const char *path)
@@ -427,7 +439,7 @@ int main(int argc, char **argv)
     free(inputs.time);
     free(inputs.values);
     free(md);
-    /* The binary is not dlclose'd: a pythonfmu binary keeps the embedded interpreter's state,
-     * which the process exit tears down. */
+    /* The binary is not dlclose'd, and the process leaves without exit-time teardown (leave). */
+    leave(0);
     return 0;
 }
