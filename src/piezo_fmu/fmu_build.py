@@ -208,10 +208,6 @@ def deterministic_zip(files: dict[str, bytes]) -> bytes:
     return buffer.getvalue()
 
 
-#: The linux64 binary of the FMU, whose exit-time function table :func:`drop_exit_unload` mends.
-LINUX_BINARY = f"binaries/linux64/{MODEL_IDENTIFIER}.so"
-
-
 def _elf_sections(data: bytes) -> dict:
     shoff, = struct.unpack_from("<Q", data, 0x28)
     shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x3A)
@@ -263,7 +259,9 @@ def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
     with zipfile.ZipFile(raw_fmu) as archive:
         files = {name: archive.read(name) for name in archive.namelist()
                  if not name.endswith("/") and "__pycache__" not in name and not name.endswith(".pyc")}
-    files[LINUX_BINARY] = drop_exit_unload(files[LINUX_BINARY])
+    for name in files:
+        if name.startswith("binaries/linux64/") and name.endswith(".so"):
+            files[name] = drop_exit_unload(files[name])
     root = complete_model_description(files["modelDescription.xml"], variables)
     guid = content_guid(files, root)
     root.set("guid", guid)

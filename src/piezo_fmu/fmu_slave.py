@@ -291,7 +291,7 @@ class PiezoImpactDamper(Fmi2Slave):
             return self._fail("do_step is only allowed after fmi2ExitInitializationMode")
         if not (step_size > 0.0 and math.isfinite(step_size)):
             return self._fail(f"communication step size = {step_size!r} s must be finite and > 0")
-        longest = max(sim.bracket_lengths.values())
+        longest = sim.longest_bracket
         if step_size > MAX_BRACKETS_PER_STEP * longest:
             return self._fail(f"communication step size = {step_size!r} s needs at least {step_size / longest:.3g} "
                               f"brackets of the integrator (the longest is {longest:.3g} s); at most "

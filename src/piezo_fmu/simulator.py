@@ -393,6 +393,11 @@ class Simulator:
         """Longest bracket (s) of each phase: ``THETA / rho(A)`` (see ``propagation.py``)."""
         return {"free": self._free.h, "contact": self._contact[RIGHT].h}
 
+    @property
+    def longest_bracket(self) -> float:
+        """The longest bracket (s) of any phase."""
+        return max(self._free.h, self._contact[RIGHT].h)
+
     # ------------------------------------------------------------------ stepping
     def advance(self, t_end: float, y: float, v: float) -> None:
         """Integrate to ``t_end`` (s) with the base ``y + v (t - t_now)`` (m), velocity ``v`` (m/s).
