@@ -19,17 +19,10 @@ from scipy.optimize import brentq
 
 from piezo_fmu import Parameters, Simulator, derive_barrier
 from piezo_fmu.parameters import MAX_COUPLED_STIFFNESS
+from test_core import harmonic_run
 from test_properties import DURATION, base_inputs, chops, dampers, hold_times, run
 
 NOMINAL_R = 52e3
-
-
-def harmonic_run(params, t_end=1.0, Y=2e-3, omega=31.0, hold=1e-3):
-    sim = Simulator(params)
-    for k in range(int(round(t_end / hold))):
-        t = k * hold
-        sim.advance((k + 1) * hold, Y * math.sin(omega * t), Y * omega * math.cos(omega * t))
-    return sim
 
 
 def coupling(params):

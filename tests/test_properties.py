@@ -62,6 +62,18 @@ def run(params, base, times):
     return sim
 
 
+def assert_momentum_exact_at_switches(sim):
+    """Total momentum before and after every onset and separation, to 1e-14 relative."""
+    M, m, M_eq = sim.params.M, sim.params.m, sim.barrier.M_eq
+    for i in sim.impacts:
+        scale = M * abs(i.dp_before) + m * abs(i.dq_before) + 1e-300
+        assert abs((M - M_eq) * i.dp_after + (m + M_eq) * i.dq_after - M * i.dp_before - m * i.dq_before) <= 1e-14 * scale
+        if not math.isnan(i.duration):
+            scale = (M - M_eq) * abs(i.dp_sep_before) + (m + M_eq) * abs(i.dq_sep_before) + 1e-300
+            before = (M - M_eq) * i.dp_sep_before + (m + M_eq) * i.dq_sep_before
+            assert abs(M * i.dp_sep_after + m * i.dq_sep_after - before) <= 1e-14 * scale
+
+
 def work_bound(sim, calls, duration):
     """Brackets a run may open: each phase's span cut into brackets, plus a restart per switch and per call."""
     switches = 2 * len(sim.impacts)
@@ -80,14 +92,7 @@ def test_random_damper_runs_with_bounded_work_exact_momentum_and_closed_ledger(p
     sim = run(params, base, times)
     # Bounded work: the contacts per second are bounded by the contact period (see README).
     assert sim.brackets_opened <= work_bound(sim, len(times), DURATION)
-    M, m, M_eq = params.M, params.m, sim.barrier.M_eq
-    for i in sim.impacts:
-        scale = M * abs(i.dp_before) + m * abs(i.dq_before) + 1e-300
-        assert abs((M - M_eq) * i.dp_after + (m + M_eq) * i.dq_after - M * i.dp_before - m * i.dq_before) <= 1e-14 * scale
-        if not math.isnan(i.duration):
-            scale = (M - M_eq) * abs(i.dp_sep_before) + (m + M_eq) * abs(i.dq_sep_before) + 1e-300
-            before = (M - M_eq) * i.dp_sep_before + (m + M_eq) * i.dq_sep_before
-            assert abs(M * i.dp_sep_after + m * i.dq_sep_after - before) <= 1e-14 * scale
+    assert_momentum_exact_at_switches(sim)
     e = sim.energy
     flowed = e.initial + abs(e.work_base) + e.dissipated + e.total
     assert abs(e.balance_error) <= 1e-9 * flowed

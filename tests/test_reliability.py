@@ -25,8 +25,8 @@ A host may run the damper for hours with inputs nobody checked. What is shown he
   through, no growth of the Python heap once the bounded log is full, and the same periodic orbit
   reached from two initial conditions.
 - **Determinism.** The same inputs give bit-identical results in two fresh processes; and they
-  should on any CPU, which they do not today (the BLAS kernel OpenBLAS picks for the CPU changes
-  the last bits, then the impacts change the rest: see the last test).
+  should on any CPU, which they do not yet (the BLAS kernel OpenBLAS picks for the CPU changes
+  the last bits, then the impacts change the rest; the README's "Reliability" section).
 
 The counts (cases tried, events per simulated second) are written to
 ``build/reliability/core.json`` and printed at the end of the module (``pytest -s``).
@@ -54,6 +54,7 @@ from piezo_fmu.propagation import THETA
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import long_run  # noqa: E402
+from test_properties import assert_momentum_exact_at_switches  # noqa: E402
 
 COUNTS: dict = {"bad_values_tried": 0, "bad_values_by_kind": {}, "events_per_second": []}
 INFO = parameter_info()
@@ -236,10 +237,10 @@ EXTREME = [
 def test_extreme_allowed_values_give_a_clear_error_or_a_bounded_run(values, base):
     """Either a ValueError naming what is out of reach, or a finite result within 3 s.
 
-    Fails today (see the report): the Taylor terms of a phase overflow to inf/NaN when
-    ``rho(A)`` or the bracket is beyond double range, and the Bernstein subdivision of
-    ``roots.crossings`` then halves NaN coefficients down to 2**-40 (a hang); ``x**2`` of a huge
-    velocity or base displacement raises ``OverflowError`` instead of a ValueError.
+    Before the core refused such values, the Taylor terms of a phase overflowed to inf/NaN when
+    ``rho(A)`` or the bracket was beyond double range, and the Bernstein subdivision of
+    ``roots.crossings`` then halved NaN coefficients down to 2**-40 (a hang); ``x**2`` of a huge
+    velocity or base displacement raised ``OverflowError`` instead of a ValueError.
     """
     counted("extreme allowed")
     y, v = base or (0.0, 0.0)
@@ -429,14 +430,7 @@ def test_random_grazing_and_sticking_starts_run_with_bounded_work_and_exact_swit
     impacts = sim.metrics.impact_count
     assert sim.brackets_opened <= duration / min(sim.bracket_lengths.values()) + 2 * impacts + calls + 1
     assert impacts <= 2 * duration / fastest_half_period(sim) + 2
-    M, m, M_eq = params.M, params.m, sim.barrier.M_eq
-    for i in sim.impacts:
-        scale = M * abs(i.dp_before) + m * abs(i.dq_before) + 1e-300
-        assert abs((M - M_eq) * i.dp_after + (m + M_eq) * i.dq_after - M * i.dp_before - m * i.dq_before) <= 1e-14 * scale
-        if not math.isnan(i.duration):
-            scale = (M - M_eq) * abs(i.dp_sep_before) + (m + M_eq) * abs(i.dq_sep_before) + 1e-300
-            before = (M - M_eq) * i.dp_sep_before + (m + M_eq) * i.dq_sep_before
-            assert abs(M * i.dp_sep_after + m * i.dq_sep_after - before) <= 1e-14 * scale
+    assert_momentum_exact_at_switches(sim)
     assert abs(sim.energy.balance_error) <= ledger_tolerance(sim, duration)
 
 
