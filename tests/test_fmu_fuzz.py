@@ -456,12 +456,12 @@ def extreme_runs(tmp_path_factory):
 
 @pytest.mark.parametrize("name", list(EXTREME))
 def test_extreme_allowed_values_are_a_clear_error_or_a_run_never_a_hang(extreme_runs, name):
-    """Fails today for all but the step of 1e300 s: K, C, M of 1e300 and a base velocity of
-    1e300 m/s hang the host in ``doStep`` (the core halves NaN brackets down to 2**-40), a step of
-    1e20 s asks for about 1e21 brackets; ``dq0 = 1e200`` and a base displacement of 1e300 m are
+    """Before the core's and the slave's guards: K, C, M of 1e300 and a base velocity of
+    1e300 m/s hung the host in ``doStep`` (the core halved NaN brackets down to 2**-40), a step of
+    1e20 s asked for about 1e21 brackets; ``dq0 = 1e200`` and a base displacement of 1e300 m were
     refused, but with Python's ``(34, 'Numerical result out of range')`` rather than a message
-    naming the value. (A step of 1e300 s is refused only by accident: snapping its end to whole
-    nanoseconds overflows, "cannot convert float infinity to integer".)"""
+    naming the value; a step of 1e300 s was refused only by accident (snapping its end to whole
+    nanoseconds overflowed: "cannot convert float infinity to integer")."""
     counted("extreme allowed")
     result = extreme_runs[name]
     assert result["exit"] == 0, result["stderr"]
@@ -479,10 +479,10 @@ def test_extreme_allowed_values_are_a_clear_error_or_a_run_never_a_hang(extreme_
 # -- memory over a long run ------------------------------------------------------------------------
 
 def test_fmu_memory_does_not_grow_with_the_impacts(host, md):
-    """Fails today: the slave builds its ``Simulator`` with the default ``log_limit=None``, so
-    the FMU keeps every impact and every maximum it ever saw (about 550 B per impact: 0.5 GB
-    per million impacts, an hour or so of a host driving it hard), and each ``fmi2GetFMUstate``
-    copies them all. The FMU never reads that log: ``log_limit=0`` in the slave fixes it."""
+    """The slave built its ``Simulator`` with the default ``log_limit=None``, so the FMU kept every
+    impact and every maximum it ever saw (about 560 B per impact: 0.5 GB per million impacts, an
+    hour or so of a host driving it hard), and each ``fmi2GetFMUstate`` copied them all. The FMU
+    never reads that log; it now keeps none (``log_limit=0``)."""
     values = usable({**long_run.CASE, **long_run.START}, md)
     host.start(values, *long_run.base_sample(0))
     names = [host.variables[n].valueReference for n in ("base_displacement", "base_velocity")]
@@ -602,16 +602,16 @@ def exit_functions(binary: bytes) -> tuple[list[int], int | None]:
 
 
 def test_the_fmu_binary_does_not_touch_freed_memory_at_process_exit(unzipdir):
-    """Fails today. pythonfmu 0.7.0's binary keeps its interpreter guard in a static
+    """pythonfmu 0.7.0's binary keeps its interpreter guard in a static
     ``std::shared_ptr<PyState>`` and also resets it from ``onLibraryUnload``, a
     ``__attribute__((destructor))`` function. At process exit the static's destructor runs first
     (an ``atexit`` handler of ``exit()``), then the dynamic loader's ``_dl_fini`` calls
-    ``onLibraryUnload``, which releases the freed control block again: valgrind reports "Invalid
+    ``onLibraryUnload``, which releases the freed control block again: valgrind reported "Invalid
     read of size 4 ... finalizePythonInterpreter ... Address is 8 bytes inside a block of size 128
     free'd" in every host (fmpy, the C host), and the decrement lands on a free chunk's list
-    pointer. Dask workers that ran the FMU abort at exit with "free(): corrupted unsorted chunks"
-    (6 of 6 sweeps); the same binary with that entry dropped from ``.fini_array`` (the static's
-    destructor already does the work) is clean under valgrind and in 6 of 6 Dask sweeps."""
+    pointer; Dask workers that ran the FMU aborted at exit with "free(): corrupted unsorted
+    chunks" (6 of 6 sweeps). The build now drops that entry from ``.fini_array`` (the static's
+    destructor already does the work): valgrind is clean and no Dask sweep aborts (0 of 6)."""
     binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.so").read_bytes()
     called, unload = exit_functions(binary)
     assert unload is None or unload not in called, (
@@ -625,14 +625,14 @@ atexit.register(lambda: sys.stderr.write(f"PYTHON FINALIZED AT EXIT IN {os.getpi
 
 
 def test_the_c_host_leaves_without_finalizing_the_embedded_interpreter(tmp_path):
-    """Fails today. The C host (``hosts/native_host.c``) has no interpreter of its own, so the
-    pythonfmu binary starts one, and ends it from its exit-time destructor (``Py_Finalize`` on its
-    own thread) when the host calls ``exit()``. Finalizing with numpy and scipy loaded meets a
+    """The C host (``hosts/native_host.c``) has no interpreter of its own, so the pythonfmu
+    binary starts one, and ends it from its exit-time destructor (``Py_Finalize`` on its own
+    thread) if the host calls ``exit()``. Finalizing with numpy and scipy loaded meets a
     use-after-free in scipy's ``_uarray`` module teardown (valgrind: "Invalid read ... Py_DECREF
     ... free_keys_object ... block free'd by _uarray globals_free"), a known embedding problem
     (Quansight-Labs/uarray#271): 3 of 200 runs of the nominal case ended in SIGSEGV, 1 of 60
-    under MALLOC_PERTURB_, the crash inside ``Py_FinalizeEx -> ... unlink_chunk``. The host
-    should leave with ``_exit`` once its output is flushed (300 of 300 clean runs)."""
+    more under MALLOC_PERTURB_, the crash inside ``Py_FinalizeEx -> ... unlink_chunk``. The host
+    now leaves with ``_exit`` once its output is flushed: 300 of 300 clean runs."""
     sys.path.insert(0, str(ROOT))
     from hosts import native
 

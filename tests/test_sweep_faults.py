@@ -7,8 +7,8 @@ a child process, as a user does, over a 4 x 4 grid of points of 1 s at a 0.1 ms 
 - **a worker killed** (SIGKILL, as the out-of-memory killer does) once two points are recorded,
   in the process pool (default) and in a Dask ``LocalCluster`` (``--dask-local``): the sweep must
   still exit with status 0 and record every point exactly once. Dask reschedules the lost task
-  on the restarted worker; the process pool does not survive it today (``BrokenProcessPool``,
-  exit status 1, 2 of 16 points; the report proposes the fix to ``harness/engine.py``).
+  on the restarted worker; the process pool did not survive it (``BrokenProcessPool``,
+  exit status 1, 2 of 16 points) until the engine started a new pool and resubmitted the rest.
 - **the sweep killed outright** (SIGKILL to its process group), twice, the second time while
   resuming: ``--resume`` finishes it, the lines written before each kill are kept byte for
   byte, and every point is there exactly once.
@@ -115,7 +115,8 @@ def assert_every_point_exactly_once(result: dict, out: Path) -> None:
 
 
 def test_process_pool_sweep_survives_a_killed_worker(tmp_path):
-    """Fails today: the pool breaks (BrokenProcessPool), the sweep exits with status 1."""
+    """Failed before the engine restarted its pool: the pool broke (BrokenProcessPool), the sweep
+    exited with status 1 with 2 of 16 points."""
     result = kill_a_worker_midway(tmp_path)
     assert_every_point_exactly_once(result, tmp_path)
 
@@ -132,8 +133,8 @@ def test_dask_sweep_survives_a_killed_worker(dask_killed):
 
 
 def test_dask_workers_exit_without_heap_corruption(dask_killed):
-    """Fails today: the Dask worker processes that ran the FMU abort at exit with glibc's
-    "free(): corrupted unsorted chunks" (in every Dask sweep tried, 6 of 6). It is the FMU
+    """Failed before the build mended the binary: the Dask worker processes that ran the FMU
+    aborted at exit with glibc's "free(): corrupted unsorted chunks" (in every Dask sweep tried, 6 of 6). It is the FMU
     binary's exit-time use-after-free (pythonfmu's ``onLibraryUnload`` releases the static
     ``shared_ptr<PyState>`` that the exit handlers have already destroyed; see
     ``test_fmu_fuzz.py`` and the report). The results are safe (each point is recorded before
