@@ -36,7 +36,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import struct
 import subprocess
 import sys
@@ -44,7 +43,6 @@ import textwrap
 import time
 import tracemalloc
 import zipfile
-from contextlib import contextmanager
 from ctypes import byref
 from pathlib import Path
 
@@ -63,6 +61,9 @@ ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import long_run  # noqa: E402
+# Hang escapes the slave's ``except Exception``, so pythonfmu reports fmi2Fatal and fmpy raises:
+# a hang inside the FMU fails the test instead of blocking it.
+from test_reliability import Hang, time_limit  # noqa: E402
 
 COUNTS: dict = {"fuzz_examples": 0, "fuzz_steps": 0, "chop_examples": 0, "bad_values_tried": 0,
                 "bad_values_by_kind": {}}
@@ -81,25 +82,6 @@ def record_counts():
 def counted(kind: str) -> None:
     COUNTS["bad_values_tried"] += 1
     COUNTS["bad_values_by_kind"][kind] = COUNTS["bad_values_by_kind"].get(kind, 0) + 1
-
-
-class Hang(BaseException):
-    """Raised by :func:`time_limit`. Inside the FMU it escapes the slave's ``except Exception``,
-    so pythonfmu reports fmi2Fatal and fmpy raises: the test fails instead of hanging."""
-
-
-@contextmanager
-def time_limit(seconds: float, what: str):
-    def expire(signum, frame):
-        raise Hang(f"{what}: no result within {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 # -- one host for the module -----------------------------------------------------------------------
