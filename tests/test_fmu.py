@@ -230,7 +230,14 @@ def test_interface_names_types_and_bounds(model_description):
                        "deflection_left", "deflection_right", "voltage_left", "voltage_right", "base_force",
                        "impact_count", "last_impact_voltage", "voltage_rms", "average_power",
                        "damping_inclination", "energy_dissipated", "energy_balance_error",
-                       "harvested_energy", "power_left", "power_right"]
+                       "harvested_energy", "power_left", "power_right", "harvested_energy_left",
+                       "harvested_energy_right"]
+    calculated = [v.name for v in md.modelVariables if v.causality == "calculatedParameter"]
+    assert calculated == ["patch_capacitance", "contact_frequency"]
+    assert all((by_name[name].variability, by_name[name].initial) == ("fixed", "calculated") for name in calculated)
+    # Appended after the outputs: the value references of the earlier variables did not move.
+    assert max(v.valueReference for v in md.modelVariables if v.causality != "calculatedParameter") < \
+        min(by_name[name].valueReference for name in calculated)
     assert (by_name["impact_count"].type, by_name["impact_count"].variability) == ("Integer", "discrete")
     assert by_name["barrier_mode"].type == "Integer"
     assert (by_name["barrier_mode"].min, by_name["barrier_mode"].max) == ("0", "1")
@@ -241,10 +248,12 @@ def test_interface_names_types_and_bounds(model_description):
         assert float(by_name[name].min) == 0.0, name
     units = {name: by_name[name].unit for name in ("base_displacement", "base_velocity", "voltage_left",
                                                   "base_force", "average_power", "damping_inclination",
-                                                  "energy_dissipated", "R_load", "g31")}
+                                                  "energy_dissipated", "R_load", "g31", "patch_capacitance",
+                                                  "contact_frequency", "harvested_energy_left")}
     assert units == {"base_displacement": "m", "base_velocity": "m/s", "voltage_left": "V", "base_force": "N",
                      "average_power": "W", "damping_inclination": "m/s", "energy_dissipated": "J",
-                     "R_load": "Ohm", "g31": "V.m/N"}
+                     "R_load": "Ohm", "g31": "V.m/N", "patch_capacitance": "F", "contact_frequency": "rad/s",
+                     "harvested_energy_left": "J"}
 
 
 def test_capabilities_default_experiment_and_model_structure(model_description):
@@ -254,13 +263,44 @@ def test_capabilities_default_experiment_and_model_structure(model_description):
     experiment = md.defaultExperiment
     assert (float(experiment.startTime), float(experiment.stopTime), float(experiment.stepSize)) == (0.0, 2.0, 1e-4)
     outputs = [v for v in md.modelVariables if v.causality == "output"]
+    calculated = [v for v in md.modelVariables if v.causality == "calculatedParameter"]
     assert [u.variable for u in md.outputs] == outputs
-    assert [u.variable for u in md.initialUnknowns] == outputs
+    # FMI 2.0 section 2.2.8: the outputs and the calculated parameters are the initial unknowns.
+    assert [u.variable for u in md.initialUnknowns] == outputs + calculated
     assert all(u.dependencies == [] for u in md.outputs)
     assert md.guid.startswith("{") and md.guid.endswith("}")
 
 
 # -- behaviour -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("values", [{}, {"t_p": 0.5e-3, "eps33": 20e-9, "W_p": 0.015, "m": 0.05, "K_eq": 5e4}],
+                         ids=["nominal", "changed"])
+def test_calculated_parameters_follow_the_start_values_in_closed_form(unzipdir, model_description, values):
+    host = Host(unzipdir, model_description, start_values=values)
+    by_name = host.variables
+    C_p, omega_c = host.fmu.getReal([by_name[name].valueReference for name in ("patch_capacitance", "contact_frequency")])
+    host.close()
+    params = Parameters(**values)
+    # Closed forms (MODEL.md section 5; the reduced mass of the two contact bodies), not the core's code.
+    sim = Simulator(params)
+    M_eq, K_eq = sim.barrier.M_eq, sim.barrier.K_eq
+    mu = 1.0 / (1.0 / (params.M - M_eq) + 1.0 / (params.m + M_eq))
+    assert C_p == pytest.approx(params.eps33 * params.W_p * params.L_p / params.t_p, rel=1e-14)
+    assert omega_c == pytest.approx(math.sqrt(K_eq / mu), rel=1e-14)
+    if not values:  # nominal: 0.34 nF, 818 rad/s, so R_opt ~ 1/(omega_c C_p) ~ 3.6 MOhm
+        assert (C_p, omega_c, 1 / (omega_c * C_p)) == pytest.approx((3.407e-10, 818.07, 3.588e6), rel=1e-3)
+
+
+def test_harvested_energy_per_barrier_adds_up_to_the_total(unzipdir, model_description):
+    host = Host(unzipdir, model_description, start_values={"voltage_model": 1, "R_load": 3.6e6})
+    (_, final), = host.run(STOP_TIME, 1e-3)
+    host.close()
+    expected = core_outputs(Parameters(voltage_model=1, R_load=3.6e6), STOP_TIME)
+    assert final["harvested_energy_left"] > 0 and final["harvested_energy_right"] > 0
+    assert final["harvested_energy_left"] + final["harvested_energy_right"] == \
+        pytest.approx(final["harvested_energy"], rel=1e-14)
+    assert_outputs_close(final, expected, rtol=1e-12)
+
 
 def test_nominal_case_through_fmpy_equals_the_core():
     result = simulate_fmu(str(FMU), stop_time=STOP_TIME, output_interval=1e-4)

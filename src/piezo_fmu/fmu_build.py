@@ -75,6 +75,8 @@ BASE_UNITS = {
     "V.m/N": {"m": 2, "s": -1, "A": -1},
     "m/V": {"kg": -1, "m": -1, "s": 3, "A": 1},
     "F/m": {"kg": -1, "m": -3, "s": 4, "A": 2},
+    "F": {"kg": -1, "m": -2, "s": 4, "A": 2},
+    "rad/s": {"s": -1, "rad": 1},
 }
 
 #: Fixed archive metadata (the earliest date a zip can hold; regular file, rw-r--r--).
@@ -172,7 +174,7 @@ def complete_model_description(xml: bytes, variables: Iterable[Variable]) -> ET.
         structure.remove(old)
     initial_unknowns = ET.SubElement(structure, "InitialUnknowns")
     for index, scalar in enumerate(scalars, start=1):
-        if scalar.get("causality") == "output":
+        if scalar.get("causality") in ("output", "calculatedParameter"):
             ET.SubElement(initial_unknowns, "Unknown", {"index": str(index)})
     return root
 

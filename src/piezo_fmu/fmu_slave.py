@@ -139,18 +139,40 @@ OUTPUTS = (
     Variable("power_right", "Real", "output", "W",
              "Instantaneous power V^2/R_load into the right barrier's load (0 under voltage_model 0)",
              min=0.0, read=lambda core: core.sim.power(+1)),
+    Variable("harvested_energy_left", "Real", "output", "J",
+             "Energy harvested in the left barrier's load since the start, integral of V^2/R_load dt "
+             "(0 under voltage_model 0)",
+             min=0.0, read=lambda core: core.energy.harvested_left),
+    Variable("harvested_energy_right", "Real", "output", "J",
+             "Energy harvested in the right barrier's load since the start, integral of V^2/R_load dt "
+             "(0 under voltage_model 0)",
+             min=0.0, read=lambda core: core.energy.harvested_right),
 )
 
-#: The whole table, in value-reference order: parameters, then inputs, then outputs.
-VARIABLES = _parameter_variables() + INPUTS + OUTPUTS
+#: Quantities the FMU derives from its parameters (FMI calculatedParameter): what a designer
+#: needs to choose a load, ``R_opt ~ 1 / (contact_frequency patch_capacitance)``.
+CALCULATED = (
+    Variable("patch_capacitance", "Real", "calculatedParameter", "F",
+             "Capacitance C_p = eps33 W_p L_p / t_p of each barrier's piezoelectric patch (MODEL.md section 5)",
+             min=0.0, read=lambda core: core.sim.barrier.C_p),
+    Variable("contact_frequency", "Real", "calculatedParameter", "rad/s",
+             "Undamped angular frequency sqrt(K_eq / mu) of the relative motion in contact, mu the reduced "
+             "mass of M - M_eq and m + M_eq (short-circuited patch)",
+             min=0.0, read=lambda core: core.sim.contact_frequency),
+)
+
+#: The whole table, in value-reference order: parameters, inputs, outputs, calculated parameters
+#: (appended last, so that the earlier value references stay as they were).
+VARIABLES = _parameter_variables() + INPUTS + OUTPUTS + CALCULATED
 
 _CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
-              "output": Fmi2Causality.output}
+              "output": Fmi2Causality.output, "calculatedParameter": Fmi2Causality.calculatedParameter}
 _VARIABILITY = {("parameter", "Real"): Fmi2Variability.fixed,
                 ("parameter", "Integer"): Fmi2Variability.fixed,
                 ("input", "Real"): Fmi2Variability.continuous,
                 ("output", "Real"): Fmi2Variability.continuous,
-                ("output", "Integer"): Fmi2Variability.discrete}
+                ("output", "Integer"): Fmi2Variability.discrete,
+                ("calculatedParameter", "Real"): Fmi2Variability.fixed}
 
 
 def scalar_variable(spec: Variable, getter: Callable, setter: Optional[Callable] = None):
@@ -171,12 +193,14 @@ class CoreView:
         self.sim, self.state, self.metrics, self.energy = sim, sim.state, sim.metrics, sim.energy
 
 
-_READERS = tuple(spec.read for spec in OUTPUTS)
+#: Every value read from the core: the outputs, then the calculated parameters.
+_READ = OUTPUTS + CALCULATED
+_READERS = tuple(spec.read for spec in _READ)
 #: Brackets one communication step may need at the least (a few minutes of CPU): a longer step is
 #: refused at once rather than left to run for hours in the host.
 MAX_BRACKETS_PER_STEP = 1e7
 #: Output values before the core exists (bad start values): NaN, and 0 for the Integer.
-_NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in OUTPUTS)
+_NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in _READ)
 
 
 def on_nanosecond_grid(t: float) -> float:
@@ -227,7 +251,7 @@ class PiezoImpactDamper(Fmi2Slave):
         if spec.causality == "input":
             return scalar_variable(spec, lambda: self._inputs[name],
                                    lambda value: self._set_input(name, value))
-        index = OUTPUTS.index(spec)
+        index = _READ.index(spec)
         return scalar_variable(spec, lambda: (self._outputs or self._read_outputs())[index])
 
     def _set_parameter(self, name: str, value) -> None:

@@ -389,6 +389,13 @@ class Simulator:
                             converted=converted, electrical_work=converted if self._vm == COUPLED else 0.0)
 
     @property
+    def contact_frequency(self) -> float:
+        """rad/s: undamped angular frequency ``sqrt(K_eq / mu)`` of the relative motion in contact
+        (short-circuited patch), ``mu`` the reduced mass of ``M - M_eq`` and ``m + M_eq``."""
+        mu = self._M_contact * self._m_contact / (self._M_contact + self._m_contact)
+        return math.sqrt(self.barrier.K_eq / mu)
+
+    @property
     def bracket_lengths(self) -> dict[str, float]:
         """Longest bracket (s) of each phase: ``THETA / rho(A)`` (see ``propagation.py``)."""
         return {"free": self._free.h, "contact": self._contact[RIGHT].h}
