@@ -59,10 +59,20 @@ class LinearPhase:
             terms[k] = terms[k - 1] @ self.A / k
         # (A^k / k!) stacked so that one product gives every Taylor coefficient of x.
         self._terms = terms
+        self._flat_terms = terms.reshape(-1, n)  # one matrix-vector product for all of them
+        #: ``h^k``, the scaling of the coefficients on a whole bracket (the usual case).
+        self._scale_h = (self.h ** _K)[:, None]
 
     def coefficients(self, x: np.ndarray, tau: float) -> np.ndarray:
         """Taylor coefficients ``c`` with ``x(t0 + s tau) = sum_k c[k] s^k``, shape (ORDER+1, n)."""
-        return (self._terms @ x) * (tau ** _K)[:, None]
+        n = x.shape[0]
+        return (self._flat_terms @ x).reshape(-1, n) * (self._scale_h if tau == self.h else (tau ** _K)[:, None])
+
+
+#: ``powers(0.0)``, shared read-only by every bracket that has not moved yet.
+POWERS_AT_START = np.zeros(PRIMITIVE_TERMS)
+POWERS_AT_START[0] = 1.0
+POWERS_AT_START.flags.writeable = False
 
 
 def powers(s: float) -> np.ndarray:
@@ -75,15 +85,19 @@ def evaluate(c: np.ndarray, s: float) -> np.ndarray:
     return (s ** _K) @ c
 
 
-def primitive(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
-    """Coefficients (``PRIMITIVE_TERMS`` of them) of ``weight * int_0^s a``."""
-    out = np.zeros(PRIMITIVE_TERMS)
+def primitive(a: np.ndarray, weight: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+    """Coefficients (``PRIMITIVE_TERMS`` of them) of ``weight * int_0^s a``; written into ``out``
+    (zero at index 0) when given."""
+    if out is None:
+        out = np.zeros(PRIMITIVE_TERMS)
     out[1:ORDER + 2] = weight * a / (_K + 1.0)
     return out
 
 
-def primitive_of_square(a: np.ndarray, weight: float = 1.0) -> np.ndarray:
-    """Coefficients of ``weight * int_0^s a^2``, exact."""
-    out = np.zeros(PRIMITIVE_TERMS)
+def primitive_of_square(a: np.ndarray, weight: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+    """Coefficients of ``weight * int_0^s a^2``, exact; written into ``out`` (zero at index 0)
+    when given."""
+    if out is None:
+        out = np.zeros(PRIMITIVE_TERMS)
     out[1:] = weight * np.convolve(a, a) / _LONG[1:]
     return out

@@ -27,8 +27,9 @@ from .barrier import derive_barrier
 from .circuit import Piece, decay, driven
 from .metrics import MetricAccumulators, Metrics
 from .parameters import COUPLED, Parameters
-from .propagation import MIN_BRACKET, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers, primitive, primitive_of_square
-from .roots import bernstein, crossings
+from .propagation import (MIN_BRACKET, POWERS_AT_START, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers,
+                          primitive, primitive_of_square)
+from .roots import bernstein, crossings, may_cross
 
 FREE = 0
 RIGHT = +1
@@ -177,7 +178,7 @@ class _Bracket:
     delta: np.ndarray | None = None
     ledger: np.ndarray | None = None
     #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
-    powers: np.ndarray = field(default_factory=lambda: powers(0.0))
+    powers: np.ndarray = field(default_factory=lambda: POWERS_AT_START)
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -252,6 +253,7 @@ class Simulator:
         self._zero = _ZERO * params.d
         self._functionals = {side: _event_functionals(side, params.d, self._contact[RIGHT].A.shape[0] if side else 5)
                              for side in (FREE, RIGHT, LEFT)}
+        self._magnitudes: dict[int, np.ndarray] = {}  # |functionals|, kept by _event_maps
         if self._vm:
             self._RC = params.R_load * self.barrier.C_p
             # Per barrier (index (side + 1) // 2: left 0, right 1): the voltage booked at time
@@ -482,7 +484,10 @@ class Simulator:
             self._piece = self._contact_piece(c, phase.h, side)
         else:
             c = phase.coefficients(x, phase.h)
-        if not np.isfinite(c).all():
+        # The largest size of each state column: the rounding level of the event functions below,
+        # and (NaN and inf propagate through it) the test that the bracket is finite.
+        column_size = np.abs(c).max(axis=0)
+        if not np.isfinite(column_size).all():
             # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
             raise ValueError(f"y = {y!r} m, v = {v!r} m/s at t = {self.t!r} s: the state (p = {self._p!r} m, "
                              f"q = {self._q!r} m, p' = {self._dp!r} m/s, q' = {self._dq!r} m/s) overflows double "
@@ -490,14 +495,15 @@ class Simulator:
         br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
         # Event functions as linear maps of the state: columns of G, Bernstein rows of B, and
         # the rounding level of each (a few ulp of the state terms that make it up).
-        functionals = self._functionals[side]
-        functionals[ONE, 2] = v  # p' = u' + v
+        functionals, magnitudes = self._event_maps(side, v)
         G = c @ functionals
         B = bernstein(G.T)
-        noise = _NOISE_ULPS * EPS * (np.abs(c).max(axis=0) @ np.abs(functionals))
+        noise = _NOISE_ULPS * EPS * (column_size @ magnitudes)
         n_terminal = 2 if side == FREE else 1
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
+        # Most event functions have no sign change on a bracket: one test of all of them first.
+        may = may_cross(B)
         for j in range(n_terminal):
             g, b = G[:, j], B[j]
             if abs(g[0]) <= max(self._zero, noise[j]):
@@ -519,19 +525,30 @@ class Simulator:
                     br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
                 b = bernstein(g)
+            elif not may[j]:
+                continue
             roots = crossings(g, direction, b, noise[j])
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], targets[j]
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
-        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2], noise[2]) if s <= br.s_switch]
+        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2], noise[2]) if s <= br.s_switch] if may[2] else []
         if side != FREE:
             br.delta = G[:, 0]
-            events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1], noise[1]) if s <= br.s_switch]
+            if may[1]:
+                events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1], noise[1]) if s <= br.s_switch]
             if self._piece is not None:
                 events += [(s, _VOLTAGE_PEAK) for s in self._piece.peaks(min(br.s_switch, 1.0))]
             events.sort()
         br.events = events
         return br
+
+    def _event_maps(self, side: int, v: float) -> tuple[np.ndarray, np.ndarray]:
+        """The event functionals of ``side`` for base velocity ``v``, and their absolute values."""
+        functionals = self._functionals[side]
+        if functionals[ONE, 2] != v or side not in self._magnitudes:
+            functionals[ONE, 2] = v  # p' = u' + v
+            self._magnitudes[side] = np.abs(functionals)
+        return functionals, self._magnitudes[side]
 
     def _ledger_integrands(self, c: np.ndarray, tau: float, side: int, v: float) -> np.ndarray:
         """Primitives, in normalised time, of the ledger's rates on a bracket (J).
@@ -541,11 +558,11 @@ class Simulator:
         """
         p = self.params
         P = np.zeros((PRIMITIVE_TERMS, 3))
-        P[:, 0] = primitive_of_square(c[:, DU], p.C * tau)
+        primitive_of_square(c[:, DU], p.C * tau, out=P[:, 0])
         if side != FREE:
-            P[:, 1] = primitive_of_square(c[:, DW] - c[:, DU], p.C_eq * tau)
+            primitive_of_square(c[:, DW] - c[:, DU], p.C_eq * tau, out=P[:, 1])
         if v != 0.0:
-            P[:, 2] = primitive(p.K * c[:, U] + p.C * c[:, DU], -v * tau)
+            primitive(p.K * c[:, U] + p.C * c[:, DU], -v * tau, out=P[:, 2])
         return P
 
     def _contact_piece(self, c: np.ndarray, tau: float, side: int) -> Piece:
