@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs bench bench-core bench-fmu bench-sweep clean
+.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,9 @@ sweep: $(STAMP)
 
 two-designs: $(STAMP)
 	$(BIN)/piezo-fmu two-designs
+
+load-sweep: $(STAMP)
+	$(BIN)/piezo-fmu load-sweep
 
 test: system-deps $(STAMP)
 	$(BIN)/python -m pytest

@@ -5,6 +5,9 @@
                     [--set NAME=VALUE ...] [--stop-time S] [--step S] [--out DIR] [--jobs N]
                     [--scheduler ADDRESS | --dask-local] [--resume | --force]
     piezo-fmu two-designs [--out DIR] [--stop-time S] [--step S]
+    piezo-fmu load-sweep [--r-min OHM] [--r-max OHM] [--count N] [--models 1,2] [--set NAME=VALUE ...]
+                         [--stop-time S] [--step S] [--impact-step S] [--out DIR] [--jobs N]
+    piezo-fmu impact-voltage [--load OHM ...] [--models 0,1,2] [--step S] [--set NAME=VALUE ...] [--out DIR]
     piezo-fmu presets
 
 Values are SI (m, kg, s, V). Bad input (an unknown parameter, an empty or reversed range, a
@@ -95,6 +98,38 @@ def _parser() -> argparse.ArgumentParser:
     two.add_argument("--out", type=Path, default=Path("results") / "two-designs", metavar="DIR",
                      help="results folder (default results/two-designs)")
 
+    load = commands.add_parser(
+        "load-sweep", help="harvested energy per impact and average power against the load R (circuit models)",
+        description="Run the nominal case at loads log-spaced from --r-min to --r-max under each of --models; "
+                    "write load_sweep.csv/.json/.md/.png with the optimum load beside R_opt ~ 1/(omega_c C_p), "
+                    "then the voltage of the first impact at the paper's load and at the optimum.")
+    common(load, DEFAULT_SWEEP_STEP, "the metrics do not depend on it")
+    load.add_argument("--r-min", type=float, default=None, metavar="OHM",
+                      help="lowest load, Ohm (default 1e3; voltage_model 2 refuses loads below about 352 Ohm)")
+    load.add_argument("--r-max", type=float, default=None, metavar="OHM", help="highest load, Ohm (default 1e9)")
+    load.add_argument("--count", type=int, default=None, metavar="N", help="loads, log-spaced (default 25)")
+    load.add_argument("--models", default="1,2", metavar="LIST",
+                      help="voltage models swept, comma-separated: 1 circuit one-way, 2 circuit coupled (default 1,2)")
+    load.add_argument("--impact-step", type=float, default=None, metavar="S",
+                      help="sampling of the single-impact figures, s (default 1e-6)")
+    load.add_argument("--no-impact", action="store_true", help="skip the single-impact figures")
+    load.add_argument("--out", type=Path, default=Path("results") / "load-sweep", metavar="DIR",
+                      help="results folder (default results/load-sweep)")
+    load.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+
+    impact = commands.add_parser(
+        "impact-voltage", help="the voltage of the first impact under the voltage models, sampled finely",
+        description="Sample the first impact of the nominal run under each of --models at each --load; write "
+                    "impact_<load>.png and .csv and impact.json. --stop-time bounds the search for the impact.")
+    common(impact, 1e-6, "the sampling of the impact")
+    impact.add_argument("--load", action="append", type=float, default=[], metavar="OHM",
+                        help="a load R, Ohm, repeatable (default: the FMU's R_load and 1/(omega_c C_p))")
+    impact.add_argument("--models", default="0,1,2", metavar="LIST",
+                        help="voltage models, comma-separated: 0 quasi-static, 1 circuit one-way, 2 coupled "
+                             "(default 0,1,2)")
+    impact.add_argument("--out", type=Path, default=Path("results") / "impact-voltage", metavar="DIR",
+                        help="results folder (default results/impact-voltage)")
+
     commands.add_parser("presets", help="list the built-in sweeps")
     return parser
 
@@ -110,7 +145,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         if args.command == "presets":
             print(presets.describe())
             return 0
-        return {"nominal": _nominal, "sweep": _sweep, "two-designs": _two_designs}[args.command](args)
+        return {"nominal": _nominal, "sweep": _sweep, "two-designs": _two_designs, "load-sweep": _load_sweep,
+                "impact-voltage": _impact_voltage}[args.command](args)
     except UsageError as error:
         print(f"{PROG} {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -203,6 +239,133 @@ def _two_designs(args) -> int:
     shutil.rmtree(unzipdir, ignore_errors=True)
     result = run_two_designs(model, out, stop_time, step, overrides)
     print("\n".join(summary_lines(result)))
+    return 0
+
+
+# -- load sweep and single impacts -----------------------------------------------------------------
+
+def _voltage_models(model, args, allowed: tuple) -> tuple[int, ...]:
+    """``--models`` as voltage_model numbers, each within the FMU's bounds and in ``allowed``."""
+    parameter = model.parameters["voltage_model"]
+    chosen = []
+    for text in args.models.split(","):
+        text = text.strip()
+        try:
+            number = parameter.coerce(int(text) if text.lstrip("-").isdigit() else text)
+        except ValueError as error:
+            raise UsageError(f"--models {args.models}: {error}") from None
+        if number not in allowed:
+            raise UsageError(f"--models {args.models}: voltage_model = {number} (quasi-static, an open circuit) "
+                             f"harvests no energy; a load sweep takes voltage_model "
+                             f"{' or '.join(map(str, allowed))}")
+        if number not in chosen:
+            chosen.append(number)
+    return tuple(chosen)
+
+
+def _load_value(model, value: float, option: str) -> float:
+    """A load for ``R_load``: finite and > 0 (log spacing), within the modelDescription's bounds."""
+    parameter = model.parameters["R_load"]
+    if not (value > 0 and value < float("inf")):
+        raise UsageError(f"{option} {value:g}: R_load = {value:g} Ohm must be a finite resistance > 0; "
+                         "allowed range (0, inf) Ohm")
+    try:
+        return float(parameter.coerce(value))
+    except ValueError as error:
+        raise UsageError(f"{option} {value:g}: {error}") from None
+
+
+def _circuit_overrides(model, args) -> dict:
+    """``--set`` for the load commands; also checks the FMU declares what they read."""
+    from .fmu import ENERGY_OUTPUTS
+    from .load import CONSTANTS
+
+    missing = ([n for n in ENERGY_OUTPUTS if n not in model.outputs]
+               + [n for n in CONSTANTS if n not in model.calculated])
+    if missing:
+        raise UsageError(f"--fmu {model.path}: the FMU lacks {', '.join(missing)} (an FMU older than the circuit "
+                         "voltage models' harvested energy outputs); rebuild it")
+    overrides = _assignments(model, args.set)
+    clash = sorted(set(overrides) & {"R_load", "voltage_model"})
+    if clash:
+        raise UsageError(f"--set {clash[0]}: the load and the voltage model are what this command varies; give "
+                         "them with --r-min/--r-max/--load and --models")
+    return overrides
+
+
+def _load_sweep(args) -> int:
+    from . import load
+    from .engine import default_jobs
+    from .fmu import FmuRunError
+    from .spec import check_times, prepare_output_dir
+
+    model = _model(args)
+    overrides = _circuit_overrides(model, args)
+    models = _voltage_models(model, args, load.CIRCUIT_MODELS)
+    r_min = _load_value(model, load.DEFAULT_R_MIN if args.r_min is None else args.r_min, "--r-min")
+    r_max = _load_value(model, load.DEFAULT_R_MAX if args.r_max is None else args.r_max, "--r-max")
+    if not r_min < r_max:
+        raise UsageError(f"--r-min {r_min:g} is not below --r-max {r_max:g}: "
+                         f"{'reversed' if r_min > r_max else 'empty'} range of R_load (give R_MIN < R_MAX, in Ohm)")
+    count = load.DEFAULT_COUNT if args.count is None else args.count
+    if count < 3:
+        raise UsageError(f"--count {count}: need at least 3 loads to locate an optimum")
+    stop_time, step = _times(args, DEFAULT_SWEEP_STEP)
+    impact_step = load.IMPACT_STEP if args.impact_step is None else args.impact_step
+    check_times(stop_time, impact_step)
+    jobs = args.jobs if args.jobs is not None else default_jobs()
+    if jobs < 1:
+        raise UsageError(f"--jobs {jobs}: need at least 1 worker")
+    out = prepare_output_dir(args.out)
+    extremes = [{**overrides, "voltage_model": m, "R_load": r} for m in models for r in (r_min, r_max)]
+    unzipdir, instance = _preflight(model, extremes, "load sweep")
+    try:
+        summary = load.run_load_sweep(model, out, unzipdir, instance, models, load.log_loads(r_min, r_max, count),
+                                      stop_time, step, overrides, jobs)
+        print("\n".join(load.summary_lines(summary)))
+        if not args.no_impact:
+            loads = {"paper's": float(model.parameters["R_load"].start), "optimum": load.best_load(summary)}
+            loads = {label: r for label, r in loads.items() if r is not None}
+            try:
+                result = load.run_impacts(model, out, instance, loads, (0, *models), impact_step, overrides,
+                                          stop_time)
+            except FmuRunError as error:
+                print(f"{PROG} load-sweep: no single-impact figures: {error}", file=sys.stderr)
+            else:
+                print("\n".join(load.impact_lines(result)))
+    finally:
+        load.cleanup(instance, unzipdir)
+    return 0
+
+
+def _impact_voltage(args) -> int:
+    from . import load
+    from .fmu import FmuRunError
+    from .spec import prepare_output_dir
+
+    model = _model(args)
+    overrides = _circuit_overrides(model, args)
+    models = _voltage_models(model, args, (0, *load.CIRCUIT_MODELS))
+    given = [_load_value(model, value, "--load") for value in args.load]
+    stop_time, step = _times(args, load.IMPACT_STEP)
+    out = prepare_output_dir(args.out)
+    nominal = float(model.parameters["R_load"].start)
+    checked = given or [nominal]
+    unzipdir, instance = _preflight(model, [{**overrides, "voltage_model": m, "R_load": r}
+                                            for m in models for r in checked], "impact voltage")
+    try:
+        if given:
+            loads = {load.ohm_text(r): r for r in given}
+        else:
+            estimate = load.circuit_constants(instance, overrides)["R_opt_estimate_ohm"]
+            loads = {"paper's": nominal, "1/(omega_c C_p)": estimate}
+        result = load.run_impacts(model, out, instance, loads, models, step, overrides, stop_time)
+    except FmuRunError as error:
+        raise UsageError(f"impact voltage (--stop-time {stop_time:g} s bounds the search for the first impact): "
+                         f"{error}") from None
+    finally:
+        load.cleanup(instance, unzipdir)
+    print("\n".join(load.impact_lines(result)))
     return 0
 
 

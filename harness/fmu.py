@@ -45,6 +45,9 @@ METRIC_UNITS = {
     "impact_count": "1", "DI": "m/s", "V_rms": "V", "P_ave": "W", "last_impact_voltage": "V",
     "energy_dissipated": "J", "energy_balance_error": "J",
 }
+#: End-of-run outputs (J) a point's record also carries when the FMU declares them: the energy
+#: harvested in the loads (voltage_model 1 and 2), in total and per barrier.
+ENERGY_OUTPUTS = ("harvested_energy", "harvested_energy_left", "harvested_energy_right")
 
 
 class FmuRunError(RuntimeError):
@@ -106,7 +109,7 @@ class Parameter:
 
 
 class FmuModel:
-    """The FMU file and its modelDescription: parameters, outputs, GUID."""
+    """The FMU file and its modelDescription: parameters, calculated parameters, outputs, GUID."""
 
     def __init__(self, path: Path | str):
         self.path = Path(path)
@@ -119,6 +122,8 @@ class FmuModel:
         self.model_identifier = self.model_description.coSimulation.modelIdentifier
         self.parameters: dict[str, Parameter] = {}
         self.outputs: dict[str, tuple[str, int]] = {}
+        #: Calculated parameters (fixed after initialization), as ``(type, valueReference)``.
+        self.calculated: dict[str, tuple[str, int]] = {}
         for variable in self.model_description.modelVariables:
             if variable.causality == "parameter":
                 self.parameters[variable.name] = Parameter(
@@ -128,6 +133,8 @@ class FmuModel:
                     description=variable.description or "")
             elif variable.causality == "output":
                 self.outputs[variable.name] = (variable.type, variable.valueReference)
+            elif variable.causality == "calculatedParameter":
+                self.calculated[variable.name] = (variable.type, variable.valueReference)
         missing = [name for name in METRIC_OUTPUTS.values() if name not in self.outputs]
         if missing:
             raise ValueError(f"{self.path} lacks the outputs {missing}; is it the piezo-impact damper FMU?")
@@ -175,11 +182,13 @@ class Instance:
                              modelIdentifier=model.model_identifier, instanceName=instance_name)
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
         self._fresh = True
+        outputs = {**METRIC_OUTPUTS, **{name: name for name in ENERGY_OUTPUTS if name in model.outputs}}
         self._metric_refs = {
-            kind: [(key, self.model.outputs[name][1]) for key, name in METRIC_OUTPUTS.items()
+            kind: [(key, self.model.outputs[name][1]) for key, name in outputs.items()
                    if self.model.outputs[name][0] == kind]
             for kind in ("Real", "Integer")
         }
+        self._metric_keys = list(outputs)
 
     def _log(self, component, instance_name, status, category, message) -> None:
         self.messages.append(message.decode("utf-8", "replace"))
@@ -209,14 +218,32 @@ class Instance:
         self.fmu.exitInitializationMode()
 
     def metrics(self) -> dict:
-        """The metric outputs now, under the harness's names (see :data:`METRIC_OUTPUTS`)."""
+        """The metric outputs now, under the harness's names (see :data:`METRIC_OUTPUTS`), and
+        the :data:`ENERGY_OUTPUTS` the FMU declares."""
         result = {}
         for kind, getter in (("Real", self.fmu.getReal), ("Integer", self.fmu.getInteger)):
             refs = self._metric_refs[kind]
             if refs:
                 for (key, _), value in zip(refs, getter([vr for _, vr in refs])):
                     result[key] = value
-        return {key: result[key] for key in METRIC_OUTPUTS}
+        return {key: result[key] for key in self._metric_keys}
+
+    def read(self, names) -> dict:
+        """The current values of outputs or calculated parameters ``names`` (after
+        :meth:`start`), by name. Raises ``KeyError`` for a name the FMU does not declare."""
+        by_kind: dict[str, list[tuple[str, int]]] = {"Real": [], "Integer": []}
+        for name in names:
+            kind, vr = self.model.outputs.get(name) or self.model.calculated[name]
+            by_kind["Integer" if kind == "Integer" else "Real"].append((name, vr))
+        result = {}
+        for kind, getter in (("Real", self.fmu.getReal), ("Integer", self.fmu.getInteger)):
+            if by_kind[kind]:
+                result.update(zip((n for n, _ in by_kind[kind]), getter([vr for _, vr in by_kind[kind]])))
+        return {name: result[name] for name in names}
+
+    def failure(self, error: Exception) -> FmuRunError:
+        """An :class:`FmuRunError` carrying the FMU's own messages about ``error``."""
+        return FmuRunError("; ".join(dict.fromkeys(self.messages)) or str(error))
 
     def run(self, values: dict, stop_time: float, step: float) -> dict:
         """Simulate from 0 to ``stop_time`` (s) with communication step ``step`` (s).
@@ -235,8 +262,7 @@ class Instance:
                 t = t_next
             return self.metrics()
         except FMICallException as error:
-            detail = "; ".join(dict.fromkeys(self.messages)) or str(error)
-            raise FmuRunError(detail) from None
+            raise self.failure(error) from None
 
     def run_point(self, index: int, values: dict, stop_time: float, step: float) -> dict:
         """One sweep point as a JSON-safe record: its index and values, status, metrics, and its
@@ -249,7 +275,7 @@ class Instance:
             record.update(status="ok", error=None,
                           **{k: (v if math.isfinite(v) else None) for k, v in metrics.items()})
         except FmuRunError as error:
-            record.update(status="error", error=str(error), **{key: None for key in METRIC_OUTPUTS})
+            record.update(status="error", error=str(error), **{key: None for key in self._metric_keys})
         record["seconds"] = time.perf_counter() - begin
         record["cpu_seconds"] = time.process_time() - begin_cpu
         return record

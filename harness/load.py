@@ -1,0 +1,467 @@
+"""The load of the circuit voltage models (issue 7): a load sweep, and the voltage of a single
+impact, through the FMU with fmpy.
+
+**Load sweep** (``piezo-fmu load-sweep``). ``R_load`` log-spaced over at least four decades, for
+``voltage_model`` 1 (circuit, one-way) and 2 (circuit, coupled); each point is one run of the
+nominal case (or ``--set`` changes) from the release. Per point: the energy harvested in both
+loads (and per barrier), the energy per impact ``harvested_energy / impact_count`` and the
+average power ``harvested_energy / stop_time``. The optimum of each is the best sampled load,
+refined by the parabola in ``log10 R`` through the logarithms of the best value and its two
+neighbours (when the best is not at an end of the range). Beside it: the estimate
+``R_opt ~ 1 / (omega_c C_p)``, with ``C_p`` (``patch_capacitance``) and ``omega_c``
+(``contact_frequency``) read from the FMU's calculated parameters. Writes ``load_sweep.csv``,
+``load_sweep.json``, ``load_sweep.md`` and ``load_sweep.png``.
+
+**Single impact** (``piezo-fmu impact-voltage``, and after a load sweep). The first impact of
+the run, sampled every microsecond (the FMU steps coarsely up to it: its events are exact
+whatever the step), under the quasi-static model 0 (open circuit, ``k_V delta``) and the
+circuit models at given loads, with the barrier's deflection. Writes ``impact_<load>.png`` and
+``impact_<load>.csv`` per load and ``impact.json``.
+
+The harness reads nothing but the FMU: it never imports the simulation core.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+from typing import Iterable, Optional
+
+import numpy as np
+from fmpy.fmi1 import FMICallException
+
+from .figures import ohms
+from .fmu import FmuModel, FmuRunError, Instance
+from .nominal import write_csv
+from .spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP
+
+MODEL_NAMES = {0: "quasi-static (open circuit)", 1: "circuit, one-way", 2: "circuit, coupled"}
+#: The models that harvest energy (model 0 is an open-circuit voltage: nothing flows).
+CIRCUIT_MODELS = (1, 2)
+DEFAULT_MODELS = (1, 2)
+#: Default loads: 1 kOhm to 1 GOhm, four points a decade. A 2 s point of model 2 costs about
+#: 12 s of CPU at 1 kOhm (its cost grows as 1/R; 25 s for all its loads), model 1 about 0.02 s
+#: whatever the load.
+DEFAULT_R_MIN, DEFAULT_R_MAX, DEFAULT_COUNT = 1e3, 1e9, 25
+#: The calculated parameters behind the estimate R_opt ~ 1 / (omega_c C_p).
+CONSTANTS = ("patch_capacitance", "contact_frequency")
+
+#: Sampling of a single impact (s), and the step that finds it (s).
+IMPACT_STEP = 1e-6
+LOCATE_STEP = 1e-4
+#: Communication step up to the window of a single impact (s); the FMU is exact across it.
+APPROACH_STEP = 1e-3
+#: Margins of the single-impact window before onset and after the contact, in contact durations.
+MARGIN_BEFORE, MARGIN_AFTER = 0.1, 0.5
+#: Models shown in a single-impact figure by default.
+DEFAULT_IMPACT_MODELS = (0, 1, 2)
+
+
+# -- loads and constants ---------------------------------------------------------------------------
+
+def log_loads(r_min: float, r_max: float, count: int) -> tuple[float, ...]:
+    """``count`` loads (Ohm) evenly spaced in ``log10 R`` from ``r_min`` to ``r_max``."""
+    values = np.logspace(math.log10(r_min), math.log10(r_max), count)
+    # 12 significant digits: 1778.27941004 rather than 1778.2794100389228; ends exact.
+    return tuple(float(f"{v:.12g}") for v in values)
+
+
+def ohm_text(value: float) -> str:
+    """A resistance as ``52 kOhm``, ``3.59 MOhm``."""
+    return ohms(value, "Ohm")
+
+
+def circuit_constants(instance: Instance, values: dict) -> dict:
+    """``C_p``, ``omega_c`` (from the FMU, initialized with ``values``) and the estimate
+    ``R_opt = 1 / (omega_c C_p)``."""
+    try:
+        instance.start(values)
+    except FMICallException as error:
+        raise instance.failure(error) from None
+    read = instance.read(CONSTANTS)
+    capacitance, omega = float(read["patch_capacitance"]), float(read["contact_frequency"])
+    return {
+        "patch_capacitance_F": capacitance,
+        "contact_frequency_rad_per_s": omega,
+        "R_opt_estimate_ohm": 1.0 / (omega * capacitance),
+    }
+
+
+# -- metrics and the optimum -----------------------------------------------------------------------
+
+def point_metrics(record: dict, stop_time: float) -> dict:
+    """A load-sweep point's metrics (SI) from an :meth:`Instance.run_point` record."""
+    def number(key):
+        value = record.get(key)
+        return float("nan") if value is None else float(value)
+
+    energy, count = number("harvested_energy"), number("impact_count")
+    return {
+        "impact_count": count,
+        "harvested_energy_J": energy,
+        "harvested_energy_left_J": number("harvested_energy_left"),
+        "harvested_energy_right_J": number("harvested_energy_right"),
+        "energy_per_impact_J": energy / count if count > 0 else float("nan"),
+        "average_power_W": energy / stop_time,
+        "seconds": number("seconds"),
+    }
+
+
+def find_optimum(loads, values) -> dict:
+    """The load that maximizes ``values``: the best sampled point, and the vertex of the
+    parabola in ``log10 R`` through the logarithms of the best value and its two neighbours
+    (``None`` when the best point is at an end of the range, or a neighbour is missing)."""
+    loads, values = np.asarray(loads, float), np.asarray(values, float)
+    if not np.isfinite(values).any():
+        return {"index": None, "R_ohm": None, "value": None, "R_refined_ohm": None, "value_refined": None,
+                "bracketed": False}
+    best = int(np.nanargmax(values))
+    result = {"index": best, "R_ohm": float(loads[best]), "value": float(values[best]),
+              "R_refined_ohm": None, "value_refined": None, "bracketed": False}
+    if 0 < best < len(values) - 1:
+        three = values[best - 1:best + 2]
+        if np.all(np.isfinite(three)) and np.all(three > 0):
+            u = np.log10(loads[best - 1:best + 2])
+            a, b, c = np.polyfit(u, np.log(three), 2)
+            if a < 0:
+                vertex = -b / (2 * a)
+                result.update(R_refined_ohm=float(10 ** vertex),
+                              value_refined=float(np.exp(np.polyval([a, b, c], vertex))), bracketed=True)
+    return result
+
+
+def end_slopes(loads, values) -> dict:
+    """``d ln(value) / d ln(R)`` between the two lowest and the two highest loads: +1 and -1
+    are the small- and large-R limits of the energy harvested per impact."""
+    loads, values = np.asarray(loads, float), np.asarray(values, float)
+
+    def slope(i, j):
+        if values[i] > 0 and values[j] > 0:
+            return float(math.log(values[j] / values[i]) / math.log(loads[j] / loads[i]))
+        return None
+
+    return {"low_R": slope(0, 1), "high_R": slope(-2, -1)}
+
+
+# -- the load sweep --------------------------------------------------------------------------------
+
+class InlineBackend:
+    """Points run one after another on one instance in this process (``--jobs 1``)."""
+
+    description = "this process"
+
+    def __init__(self, instance: Instance):
+        self.instance = instance
+
+    def run(self, todo: Iterable[tuple]):
+        for tag, index, values, stop_time, step in todo:
+            yield tag, self.instance.run_point(index, values, stop_time, step)
+
+    def close(self, cancel: bool = False) -> None:
+        pass
+
+
+def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance, models=DEFAULT_MODELS,
+                   loads=None, stop_time: float = DEFAULT_STOP_TIME, step: float = DEFAULT_SWEEP_STEP,
+                   overrides: Optional[dict] = None, jobs: int = 1) -> dict:
+    """Run the load sweep of each model in ``models`` and write its files into ``out``.
+
+    ``instance`` (on ``unzipdir``) reads the constants and, with ``jobs == 1``, runs the points;
+    otherwise a :class:`harness.engine.ProcessPool` of ``jobs`` workers runs them. Returns the
+    summary written to ``load_sweep.json``.
+    """
+    out = Path(out)
+    loads = tuple(loads or log_loads(DEFAULT_R_MIN, DEFAULT_R_MAX, DEFAULT_COUNT))
+    overrides = dict(overrides or {})
+    nominal_load = float(model.parameters["R_load"].start)
+    values = {m: {**overrides, "voltage_model": m} for m in models}
+    constants = {m: circuit_constants(instance, values[m]) for m in models}
+
+    # Model 2's cost grows as 1/R: its lowest loads go first so the workers finish together.
+    todo = [(m, i, {**values[m], "R_load": r}, stop_time, step)
+            for m in models for i, r in enumerate((*loads, nominal_load))]
+    todo.sort(key=lambda item: (-item[0], item[2]["R_load"]))
+    begin = time.perf_counter()
+    if jobs > 1:
+        from .engine import ProcessPool
+
+        backend = ProcessPool(model, unzipdir, min(jobs, len(todo)))
+    else:
+        backend = InlineBackend(instance)
+    records = {}
+    try:
+        for tag, record in backend.run(todo):
+            records[tag, record["index"]] = record
+    except BaseException:
+        backend.close(cancel=True)
+        raise
+    backend.close()
+    seconds = time.perf_counter() - begin
+
+    failed = {f"model {m}, R_load = {record['values']['R_load']:g} Ohm": record["error"]
+              for (m, _), record in sorted(records.items()) if record["status"] != "ok"}
+    rows, per_model = [], {}
+    for m in models:
+        metrics = [point_metrics(records[m, i], stop_time) for i in range(len(loads))]
+        for r, point in zip(loads, metrics):
+            rows.append({"voltage_model": m, "R_load_ohm": r, **point})
+        energy = [p["energy_per_impact_J"] for p in metrics]
+        power = [p["average_power_W"] for p in metrics]
+        per_model[str(m)] = {
+            "name": MODEL_NAMES[m],
+            **constants[m],
+            "optimum": {"energy_per_impact_J": find_optimum(loads, energy),
+                        "average_power_W": find_optimum(loads, power)},
+            "nominal_load": {"R_load_ohm": nominal_load,
+                             **point_metrics(records[m, len(loads)], stop_time)},
+            "slopes_energy_per_impact": end_slopes(loads, energy),
+            "cpu_seconds": sum(records[m, i]["cpu_seconds"] for i in range(len(loads) + 1)),
+        }
+    files = {"csv": out / "load_sweep.csv", "json": out / "load_sweep.json", "table": out / "load_sweep.md"}
+    write_csv(files["csv"], {key: [row[key] for row in rows] for key in rows[0] if key != "seconds"})
+    summary = {
+        "case": "nominal (MODEL.md section 7) from the release; every point one run from t = 0",
+        "duration_s": stop_time,
+        "communication_step_s": step,
+        "loads_ohm": list(loads),
+        "decades": math.log10(loads[-1] / loads[0]),
+        "overrides": overrides,
+        "models": per_model,
+        "failed_points": failed,
+        "wall_seconds": seconds,
+        "backend": backend.description,
+        "fmu": {"path": str(model.path), "guid": model.guid},
+        "optimum_method": ("best sampled load; refined: vertex of the parabola in log10 R through ln(value) at "
+                           "the best load and its two neighbours"),
+    }
+
+    from . import figures
+
+    files["figure"] = figures.load_sweep_figure(rows, summary, out)
+    summary["files"] = {key: str(path) for key, path in files.items()}
+    files["table"].write_text(markdown_table(summary, rows))
+    files["json"].write_text(json_text(summary))
+    return summary
+
+
+def best_load(summary: dict) -> Optional[float]:
+    """The measured optimum of the average power of the first model swept (refined if it can;
+    ``None`` if no point ran)."""
+    optimum = next(iter(summary["models"].values()))["optimum"]["average_power_W"]
+    return optimum["R_refined_ohm"] or optimum["R_ohm"]
+
+
+def json_text(value) -> str:
+    """``value`` as JSON text, NaN (a metric left undefined) written as null."""
+    def safe(item):
+        if isinstance(item, float) and not math.isfinite(item):
+            return None
+        if isinstance(item, dict):
+            return {key: safe(v) for key, v in item.items()}
+        if isinstance(item, (list, tuple)):
+            return [safe(v) for v in item]
+        return item
+
+    return json.dumps(safe(value), indent=2, allow_nan=False) + "\n"
+
+
+def _optimum_cells(optimum: dict, factor: float) -> str:
+    if optimum["index"] is None:
+        return "n/a | n/a | n/a"
+    refined = (f"{ohm_text(optimum['R_refined_ohm'])} ({optimum['value_refined'] * factor:.4g})"
+               if optimum["bracketed"] else "at the range's end: not bracketed")
+    return f"{ohm_text(optimum['R_ohm'])} | {optimum['value'] * factor:.4g} | {refined}"
+
+
+def markdown_table(summary: dict, rows: list[dict]) -> str:
+    """The optimum of each model beside the estimate, then every point."""
+    lines = [
+        "# Load sweep",
+        "",
+        f"Duration simulated: **{summary['duration_s']:g} s** per point from the nominal release, through the FMU "
+        f"with fmpy (communication step {summary['communication_step_s']:g} s); loads "
+        f"{ohm_text(summary['loads_ohm'][0])} to {ohm_text(summary['loads_ohm'][-1])}, "
+        f"{len(summary['loads_ohm'])} points ({summary['decades']:.3g} decades)."
+        + (f" Changed parameters: {summary['overrides']}." if summary["overrides"] else ""),
+        "",
+        "| model | R_opt ~ 1/(omega_c C_p) | best load, energy/impact | energy/impact (uJ) | refined (uJ) "
+        "| best load, power | average power (mW) | refined (mW) "
+        f"| at R_load = {ohm_text(next(iter(summary['models'].values()))['nominal_load']['R_load_ohm'])}: "
+        "uJ/impact, mW |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for m, entry in summary["models"].items():
+        nominal = entry["nominal_load"]
+        lines.append(
+            f"| {m} ({entry['name']}) | {ohm_text(entry['R_opt_estimate_ohm'])} "
+            f"| {_optimum_cells(entry['optimum']['energy_per_impact_J'], 1e6)} "
+            f"| {_optimum_cells(entry['optimum']['average_power_W'], 1e3)} "
+            f"| {nominal['energy_per_impact_J'] * 1e6:.4g}, {nominal['average_power_W'] * 1e3:.4g} |")
+    entry = next(iter(summary["models"].values()))
+    lines += [
+        "",
+        f"`C_p` = {entry['patch_capacitance_F']:.4g} F, `omega_c` = {entry['contact_frequency_rad_per_s']:.4g} rad/s "
+        "(the FMU's `patch_capacitance` and `contact_frequency`). Refined: "
+        f"{summary['optimum_method'].split('refined: ')[1]}.",
+        "",
+        "| model | R_load (Ohm) | impacts | harvested (uJ) | left (uJ) | right (uJ) | per impact (uJ) | power (mW) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(f"| {row['voltage_model']} | {row['R_load_ohm']:.4g} | {row['impact_count']:.0f} "
+                     f"| {row['harvested_energy_J'] * 1e6:.5g} | {row['harvested_energy_left_J'] * 1e6:.5g} "
+                     f"| {row['harvested_energy_right_J'] * 1e6:.5g} | {row['energy_per_impact_J'] * 1e6:.5g} "
+                     f"| {row['average_power_W'] * 1e3:.5g} |")
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(summary: dict) -> list[str]:
+    """What ``piezo-fmu load-sweep`` prints."""
+    loads = summary["loads_ohm"]
+    lines = [f"load sweep, {len(loads)} loads {ohm_text(loads[0])} to {ohm_text(loads[-1])}, "
+             f"{summary['duration_s']:g} s each, {summary['wall_seconds']:.1f} s on {summary['backend']}"]
+    for m, entry in summary["models"].items():
+        estimate = ohm_text(entry["R_opt_estimate_ohm"])
+        lines.append(f"  model {m} ({entry['name']}): R_opt ~ 1/(omega_c C_p) = {estimate}")
+        for key, factor, unit in (("energy_per_impact_J", 1e6, "uJ per impact"), ("average_power_W", 1e3, "mW")):
+            o = entry["optimum"][key]
+            if o["index"] is None:
+                lines.append(f"    {key}: no point ran")
+                continue
+            refined = (f", refined {ohm_text(o['R_refined_ohm'])}: {o['value_refined'] * factor:.4g} {unit}"
+                       if o["bracketed"] else " (at the end of the range: widen it)")
+            lines.append(f"    best {ohm_text(o['R_ohm'])}: {o['value'] * factor:.4g} {unit}{refined}")
+    for point, error in summary["failed_points"].items():
+        lines.append(f"  rejected by the FMU: {point}: {error}")
+    lines.append(f"  files in {Path(summary['files']['json']).parent}")
+    return lines
+
+
+# -- a single impact -------------------------------------------------------------------------------
+
+def locate_first_impact(instance: Instance, values: dict, stop_time: float) -> dict:
+    """The first contact of a run (quasi-static model: the motion before it is the same under
+    every model): the time span that holds its onset and end (to :data:`LOCATE_STEP`), and
+    the barrier hit."""
+    names = ("impact_count", "deflection_left", "deflection_right")
+    onset = side = None
+    n_steps = max(1, math.ceil(stop_time / LOCATE_STEP - 1e-9))
+    t = 0.0
+    try:
+        instance.start({**values, "voltage_model": 0})
+        for k in range(1, n_steps + 1):
+            before, t = t, stop_time if k == n_steps else k * LOCATE_STEP
+            instance.fmu.doStep(currentCommunicationPoint=before, communicationStepSize=t - before)
+            now = instance.read(names)
+            if onset is None and now["impact_count"] >= 1:
+                onset = before
+            if onset is not None:
+                if side is None:
+                    side = "left" if now["deflection_left"] != 0 else "right" if now["deflection_right"] != 0 else None
+                if now["deflection_left"] == 0 and now["deflection_right"] == 0:
+                    # A contact shorter than LOCATE_STEP shows no deflection: take the right one.
+                    return {"onset_after_s": onset, "end_before_s": t, "side": side or "right"}
+    except FMICallException as error:
+        raise instance.failure(error) from None
+    raise FmuRunError(f"no complete impact within {stop_time:g} s")
+
+
+def sample_window(instance: Instance, values: dict, start: float, stop: float, step: float,
+                  names: tuple) -> dict:
+    """Outputs ``names`` every ``step`` from ``start`` to ``stop`` (s) of a run from t = 0 with
+    ``values``; the FMU is stepped by :data:`APPROACH_STEP` up to ``start``."""
+    count = int(round((stop - start) / step))
+    times = start + step * np.arange(count + 1)
+    table = {name: np.empty(count + 1) for name in names}
+    try:
+        instance.start(values)
+        t = 0.0
+        while t < start:
+            size = min(APPROACH_STEP, start - t)
+            instance.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=size)
+            t = t + size if start - (t + size) > 1e-15 else start
+        for k in range(count + 1):
+            if k:
+                instance.fmu.doStep(currentCommunicationPoint=times[k - 1],
+                                    communicationStepSize=times[k] - times[k - 1])
+            for name, value in instance.read(names).items():
+                table[name][k] = value
+    except FMICallException as error:
+        raise instance.failure(error) from None
+    return {"time": times, **table}
+
+
+def run_impacts(model: FmuModel, out: Path, instance: Instance, loads: dict, models=DEFAULT_IMPACT_MODELS,
+                step: float = IMPACT_STEP, overrides: Optional[dict] = None,
+                stop_time: float = DEFAULT_STOP_TIME) -> dict:
+    """The first impact under each model in ``models`` at each load of ``loads``
+    (``{label: R}``; a label that is :func:`ohm_text` of its load adds nothing to the
+    figure), sampled every ``step``; writes a figure and a CSV per load and
+    ``impact.json``. Returns what ``impact.json`` holds."""
+    out = Path(out)
+    overrides = dict(overrides or {})
+    found = locate_first_impact(instance, overrides, stop_time)
+    duration = found["end_before_s"] - found["onset_after_s"]
+    start = max(0.0, found["onset_after_s"] - MARGIN_BEFORE * duration)
+    start = math.floor(start / step) * step
+    stop = found["end_before_s"] + MARGIN_AFTER * duration
+    side = found["side"]
+    names = (f"voltage_{side}", f"deflection_{side}", f"harvested_energy_{side}", "last_impact_voltage",
+             "impact_count")
+    result = {"duration_s": stop_time, "sampling_step_s": step, "window_s": [start, stop], "barrier": side,
+              "overrides": overrides, "loads": {}, "fmu": {"path": str(model.path), "guid": model.guid}}
+    from . import figures
+
+    for label, load in loads.items():
+        series, entries = {}, {}
+        for m in models:
+            s = sample_window(instance, {**overrides, "voltage_model": m, "R_load": load}, start, stop, step, names)
+            after = s["impact_count"] >= 1
+            voltage = s[f"voltage_{side}"]
+            peak = int(np.argmax(np.abs(voltage)))
+            entries[str(m)] = {
+                "name": MODEL_NAMES[m],
+                "peak_voltage_sampled_V": float(abs(voltage[peak])),
+                "peak_time_s": float(s["time"][peak]),
+                "last_impact_voltage_V": float(s["last_impact_voltage"][-1]),
+                "energy_harvested_in_window_J": float(s[f"harvested_energy_{side}"][-1]
+                                                      - s[f"harvested_energy_{side}"][0]),
+                "max_deflection_m": float(np.max(np.abs(s[f"deflection_{side}"]))),
+                "impacts_in_window": int(s["impact_count"][-1] - s["impact_count"][0]),
+                "onset_s": float(s["time"][np.argmax(after)]) if after.any() else None,
+            }
+            series[m] = s
+        slug = ohm_text(load).replace(" ", "")
+        csv = out / f"impact_{slug}.csv"
+        columns = {"time": series[models[0]]["time"]}
+        for m, s in series.items():
+            columns[f"voltage_model{m}"] = s[f"voltage_{side}"]
+            columns[f"deflection_model{m}"] = s[f"deflection_{side}"]
+        write_csv(csv, columns)
+        figure = figures.impact_figure(series, side, load, "" if label == ohm_text(load) else label,
+                                       out / f"impact_{slug}.png")
+        result["loads"][label] = {"R_load_ohm": load, "models": entries, "csv": str(csv), "figure": str(figure)}
+    (out / "impact.json").write_text(json_text(result))
+    return result
+
+
+def impact_lines(result: dict) -> list[str]:
+    """What the single-impact run prints."""
+    lines = [f"first impact ({result['barrier']} barrier), {1e3 * result['window_s'][0]:.3f} to "
+             f"{1e3 * result['window_s'][1]:.3f} ms, sampled every {result['sampling_step_s']:g} s:"]
+    for label, entry in result["loads"].items():
+        parts = [f"model {m}: peak {e['peak_voltage_sampled_V']:.4g} V, "
+                 f"{e['energy_harvested_in_window_J'] * 1e6:.3g} uJ" for m, e in entry["models"].items()]
+        named = "" if label == ohm_text(entry["R_load_ohm"]) else f" ({label})"
+        lines.append(f"  {ohm_text(entry['R_load_ohm'])}{named}: " + "; ".join(parts))
+        lines.append(f"    {entry['figure']}")
+    return lines
+
+
+def cleanup(instance: Instance, unzipdir: str) -> None:
+    """Free ``instance`` and remove the folder its FMU was extracted to."""
+    instance.free()
+    shutil.rmtree(unzipdir, ignore_errors=True)
