@@ -35,19 +35,27 @@ _TO_BERNSTEIN = np.array(
 )
 
 
+def _split_matrices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """de Casteljau at 1/2 as two matrices: ``left = b @ L``, ``right = b @ R`` (degree ``n``).
+
+    ``left_j = sum_{i<=j} C(j, i) b_i / 2^j`` and ``right_j = sum_{i>=j} C(n-j, i-j) b_i / 2^(n-j)``:
+    convex combinations of the coefficients, as stable as the recursive form."""
+    L = np.zeros((n + 1, n + 1))
+    R = np.zeros((n + 1, n + 1))
+    for j in range(n + 1):
+        for i in range(j + 1):
+            L[i, j] = math.comb(j, i) / 2.0**j
+        for i in range(j, n + 1):
+            R[i, j] = math.comb(n - j, i - j) / 2.0 ** (n - j)
+    return L, R
+
+
+_SPLIT_LEFT, _SPLIT_RIGHT = _split_matrices(ORDER)
+
+
 def _split(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """de Casteljau at 1/2: Bernstein coefficients of the left and right halves."""
-    n = b.size - 1
-    left = np.empty_like(b)
-    right = np.empty_like(b)
-    work = b.copy()
-    left[0] = work[0]
-    right[n] = work[n]
-    for j in range(1, n + 1):
-        work = 0.5 * (work[:-1] + work[1:])
-        left[j] = work[0]
-        right[n - j] = work[-1]
-    return left, right
+    return b @ _SPLIT_LEFT, b @ _SPLIT_RIGHT
 
 
 def _sign_pattern(b: np.ndarray) -> tuple[int, int, int]:

@@ -464,11 +464,11 @@ class Simulator:
     def _move_to(self, br: "_Bracket", s: float, t: float) -> None:
         """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
         br.powers = powers(s)
-        x = br.powers[:STATE_TERMS] @ br.c
+        u, w, du, dw = (br.powers[:STATE_TERMS] @ br.c).tolist()[:4]
         base = br.base + br.v * s * br.tau
         self.t = t
-        self._p, self._q = float(x[U] + base), float(x[W] + base)
-        self._dp, self._dq = float(x[DU] + br.v), float(x[DW] + br.v)
+        self._p, self._q = u + base, w + base
+        self._dp, self._dq = du + br.v, dw + br.v
         self._y = base
         br.s = s
 
