@@ -6,8 +6,8 @@ Usage (from the repository root, with the project's Python)::
     python crosscheck/run_crosscheck.py --write      # rewrite _in.csv, _ref.opt and _ref.csv
 
 IMPORTER is one of ``fmpy``, ``libcosim``, ``ecos``, ``native`` (the project's C host) or
-``fmpy-simulate`` (fmpy's own ``simulate_fmu``; see ReadMe.md for why it is not expected to pass
-at 1e-10). ``all`` runs the first four. For each importer the script prints the worst relative
+``fmpy-simulate`` (fmpy's own ``simulate_fmu``; see ReadMe.md for why it is not bit-identical
+to the others). ``all`` runs the first four. For each importer the script prints the worst relative
 deviation of every output from ``PiezoImpactDamper_ref.csv`` (the band is defined in ReadMe.md
 and in :mod:`crosscheck.scenario`), whether the result is bit-identical to the reference, and
 ``PASS`` or ``FAIL``; with ``--out`` it writes ``<importer>_out.csv`` there. The exit status is

@@ -1,7 +1,7 @@
 """The same FMU in three importers, and the FMI cross-check artefacts (``crosscheck/``).
 
 Scenario (``crosscheck/scenario.py``): harmonic base excitation near resonance (``Y = 1 mm``,
-``w = 31.6 rad/s``), both masses at rest at the origin, 0 to 3 s at a 1 ms communication step.
+``w = 31.6 rad/s``), both masses at rest at the origin, 0 to 1 s at a 1 ms communication step.
 
 What is proved here:
 
@@ -12,12 +12,17 @@ What is proved here:
   and the fmpy loop both count time in whole nanoseconds (``t_k = (k * 10**6) / 1e9``); ecos adds
   the step to its time at every step, and fmpy replaying ecos's own ``(t_k, h)`` calls gives
   ecos's results bit for bit;
-- the files follow the FMI cross-check layout, the reference is what the committed FMU gives,
-  and ``crosscheck/run_crosscheck.py`` passes for each importer.
+- the files follow the FMI cross-check layout, the committed FMU passes its reference, and
+  ``crosscheck/run_crosscheck.py`` passes for each importer;
+- the reference holds on another machine: under other BLAS kernels and without numpy's AVX-512
+  code (what another CPU family runs) the FMU's results change in their last bits, and still
+  pass the reference's band.
 
-The response is strongly sensitive (impacts): a change of one unit in the last place of a
-communication time grows to ~1e-5 relative by 3 s. Agreement to 1e-10 therefore needs the FMU's
-result not to depend on how an importer rounds its times: see crosscheck/ReadMe.md.
+The response is sensitive (impacts): a change of one unit in the last place grows about tenfold
+per 0.1 s, to ~1e-11 by 1 s (the scenario's end) and ~1e-5 by 3 s. Agreement between importers
+therefore needs the FMU's result not to depend on how an importer rounds its times: see
+crosscheck/ReadMe.md. Bit-identity is checked between importers run here, on one machine; the
+committed reference is checked to its band, which is what holds across machines.
 
 Nothing is skipped: fmpy, libcosimpy and ecospy are dependencies of the project, and ecospy
 needs Debian's libtbb12, which the project's setup installs. A missing one fails the tests.
@@ -25,6 +30,8 @@ needs Debian's libtbb12, which the project's setup installs. A missing one fails
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 from functools import lru_cache
@@ -80,12 +87,12 @@ def test_input_file_is_the_scenario_sampled_on_the_grid():
     assert list(columns) == list(scenario.INPUTS)
     for name in scenario.INPUTS:
         assert np.array_equal(columns[name], expected[name]), f"{scenario.IN_CSV.name} is stale: rerun --write"
-    assert time[0] == 0.0 and time[-1] == scenario.STOP_TIME and len(time) == 3001
+    assert time[0] == 0.0 and time[-1] == scenario.STOP_TIME and len(time) == 1001
 
 
 def test_opt_file_states_start_stop_step_and_tolerance():
     options = scenario.read_opt()
-    assert options == {"StartTime": 0.0, "StopTime": 3.0, "StepSize": 1e-3, "RelTol": 1e-10,
+    assert options == {"StartTime": 0.0, "StopTime": 1.0, "StepSize": 1e-3, "RelTol": 1e-10,
                        "OutputIntervalLength": 1e-3}
 
 
@@ -99,17 +106,51 @@ def test_files_follow_the_cross_check_csv_rules():
         assert not any(line.endswith(",") for line in lines)
     ref_time, ref = reference()
     assert list(ref) == outputs_of_fmu(), "the reference holds every output of the FMU, in model order"
-    assert ref_time[0] == 0.0 and ref_time[-1] == 3.0
+    assert ref_time[0] == 0.0 and ref_time[-1] == 1.0
     assert (REPO / "crosscheck" / "ReadMe.md").is_file()
 
 
-def test_reference_is_what_the_committed_fmu_gives():
+def test_the_committed_fmu_passes_its_reference():
     result = run("fmpy")
     ref_time, ref = reference()
     comparison = scenario.compare(result.time, result.outputs, ref_time, ref)
-    assert comparison.all_bit_identical, (
+    assert comparison.passed, (
         "the reference is stale (the FMU changed?): rerun python crosscheck/run_crosscheck.py --write\n"
-        + comparison.report())
+        + comparison.report() + "\n" + "\n".join(comparison.problems))
+
+
+#: What another CPU family changes: OpenBLAS's kernels (chosen per CPU; Prescott is the plain
+#: SSE3 one) and numpy's dispatched SIMD code (AVX-512 loops off).
+OTHER_MACHINE = {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}
+_OTHER_RUN = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+from crosscheck import importers, scenario
+result = importers.run("fmpy", scenario.FMU_PATH)
+np.save(sys.argv[2], np.column_stack([result.outputs[name] for name in result.outputs]).astype(float))
+ref_time, ref = scenario.read_reference()
+comparison = scenario.compare(result.time, result.outputs, ref_time, ref)
+print(json.dumps({"passed": comparison.passed, "bit_identical": comparison.all_bit_identical,
+                  "report": comparison.report(), "problems": comparison.problems[:5]}))
+"""
+
+
+def test_the_reference_holds_under_other_blas_kernels_and_simd_levels(tmp_path):
+    env = {**os.environ, **OTHER_MACHINE}
+    saved = tmp_path / "other.npy"
+    completed = subprocess.run([sys.executable, "-c", _OTHER_RUN, str(REPO), str(saved)], capture_output=True,
+                               text=True, timeout=300, cwd=REPO, env=env)
+    assert completed.returncode == 0, completed.stderr[-4000:]
+    verdict = json.loads(completed.stdout.strip().splitlines()[-1])
+    here = run("fmpy")
+    other = np.load(saved)
+    mine = np.column_stack([here.outputs[name] for name in here.outputs]).astype(float)
+    if np.array_equal(other, mine):
+        pytest.skip(f"{OTHER_MACHINE} changes no bit on this machine: it already computes that way")
+    # The arithmetic did change (the premise), and the reference still holds to its band.
+    assert not verdict["bit_identical"]
+    assert verdict["passed"], verdict["report"] + "\n" + "\n".join(verdict["problems"])
 
 
 # -- what each importer passes to fmi2DoStep ------------------------------------------------------------
@@ -130,7 +171,7 @@ def test_ecos_accumulates_its_time():
     assert np.array_equal(ecos.time, accumulated)
     assert ecos.steps == [(t, 1e-3) for t in accumulated[:-1]]
     drift = np.abs(accumulated - scenario.grid())
-    assert np.count_nonzero(drift) > 2900 and 1e-13 < drift.max() < 1e-12  # ~2.2e-13 s at 3 s
+    assert np.count_nonzero(drift) > 950 and 1e-16 < drift.max() < 1e-14  # ~7.8e-16 s by 1 s
 
 
 # -- the three importers agree ----------------------------------------------------------------------------
@@ -176,10 +217,10 @@ def test_crosscheck_script_reports_a_failure():
     ref_time, ref = reference()
     perturbed = {name: values.copy() for name, values in ref.items()}
     v = ref["main_velocity"]
-    band = abs(v[1500]) + np.max(np.abs(v))
-    perturbed["main_velocity"][1500] = v[1500] + 3e-10 * band
+    band = abs(v[500]) + np.max(np.abs(v))
+    perturbed["main_velocity"][500] = v[500] + 3e-10 * band
     assert not scenario.compare(ref_time, perturbed, ref_time, ref).passed
-    perturbed["main_velocity"][1500] = v[1500] + 0.5e-10 * band
+    perturbed["main_velocity"][500] = v[500] + 0.5e-10 * band
     assert scenario.compare(ref_time, perturbed, ref_time, ref).passed
     perturbed["impact_count"][-1] += 1
     assert not scenario.compare(ref_time, perturbed, ref_time, ref).passed
