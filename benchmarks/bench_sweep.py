@@ -3,7 +3,7 @@
     python benchmarks/bench_sweep.py [--step S] [--jobs N] [--naive-points 20] [--core-points 60]
 
 1. The engine: the full ``figs4-9`` preset set (2 x 31 x 31 = 1922 points, each 0 to 2 s at the
-   communication step ``--step``, default the sweep default 0.01 s) on the local process pool
+   communication step ``--step``, default the sweep default, 0.02 s) on the local process pool
    over all cores, worker start-up included; then the results (NetCDF, CSV, zones, figures).
 2. The naive loop: ``fmpy.simulate_fmu(fmu_file, ...)`` called afresh per point, one core, the
    same communication step, on ``--naive-points`` points spread over the preset set; its
@@ -13,7 +13,7 @@
    never does).
 4. The step's price: on ``--compare-points`` points, one in-process FMU instance (what a
    worker does) against the naive loop at the chosen step and each of ``--compare-steps``
-   (default 0.1 s and 1e-3 s): the step trades the two ratios against each other.
+   (default 0.1 s, 0.01 s and 1e-3 s): the step trades the two ratios against each other.
 
 Every cost is measured twice: wall time, and CPU time (``time.process_time`` of the process that
 does the work; each engine worker times its own points). Wall time is what a user waits; CPU
@@ -76,8 +76,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="engine worker processes")
     parser.add_argument("--naive-points", type=int, default=20)
     parser.add_argument("--core-points", type=int, default=60)
-    parser.add_argument("--compare-steps", type=float, nargs="*", default=[0.1, 1e-3], metavar="S",
-                        help="other communication steps to price on a few points (default 0.1 1e-3)")
+    parser.add_argument("--compare-steps", type=float, nargs="*", default=[0.1, 0.01, 1e-3], metavar="S",
+                        help="other communication steps to price on a few points (default 0.1 0.01 1e-3)")
     parser.add_argument("--compare-points", type=int, default=20)
     parser.add_argument("--fmu", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=None, help="keep the sweep results here")

@@ -57,8 +57,16 @@ def _init_worker(fmu_path: str, unzipdir: str) -> None:
     _WORKER = Instance(FmuModel(fmu_path), unzipdir, instance_name=f"worker{os.getpid()}")
 
 
-def _run_in_worker(index: int, values: dict, stop_time: float, step: float) -> dict:
-    return _WORKER.run_point(index, values, stop_time, step)
+def _run_chunk_in_worker(items: list[tuple]) -> list[dict]:
+    """Several ``(index, values, stop_time, step)`` points in one task: one round trip for all."""
+    return [_WORKER.run_point(*item) for item in items]
+
+
+def _chunks(items: list, jobs: int) -> list[list]:
+    """``items`` in tasks of a few points: enough tasks to keep every worker busy to the end
+    (about 16 per worker), few enough that a task's round trip is small beside its work."""
+    size = max(1, min(8, len(items) // (16 * max(1, jobs))))
+    return [items[i:i + size] for i in range(0, len(items), size)]
 
 
 class ProcessPool:
@@ -85,24 +93,30 @@ class ProcessPool:
         point finishes, each exactly once, across worker deaths."""
         remaining = {(item[0], item[1]): item for item in todo}
         while remaining:
-            futures = {self._executor.submit(_run_in_worker, index, values, stop_time, step): (tag, index)
-                       for tag, index, values, stop_time, step in remaining.values()}
+            futures = {}
+            for chunk in _chunks(list(remaining), self.jobs):
+                items = [remaining[key][1:] for key in chunk]
+                futures[self._executor.submit(_run_chunk_in_worker, items)] = chunk
             try:
                 for future in concurrent.futures.as_completed(futures):
-                    record = future.result()
-                    del remaining[futures[future]]
-                    yield futures[future][0], record
+                    yield from self._finished(future.result(), futures[future], remaining)
             except concurrent.futures.process.BrokenProcessPool:
                 if self.restarts >= self.MAX_RESTARTS:
                     raise
                 self.restarts += 1
-                # Points that finished before the break are kept; the rest run in a new pool.
-                for future, key in futures.items():
-                    if key in remaining and future.done() and not future.cancelled() and future.exception() is None:
-                        del remaining[key]
-                        yield key[0], future.result()
+                # Tasks that finished before the break are kept; the rest run in a new pool.
+                for future, chunk in futures.items():
+                    if chunk[0] in remaining and future.done() and not future.cancelled() \
+                            and future.exception() is None:
+                        yield from self._finished(future.result(), chunk, remaining)
                 self._executor.shutdown(wait=False, cancel_futures=True)
                 self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
+
+    @staticmethod
+    def _finished(records: list[dict], chunk: list[tuple], remaining: dict) -> Iterator[tuple]:
+        for key, record in zip(chunk, records):
+            del remaining[key]
+            yield key[0], record
 
     def close(self, cancel: bool = False) -> None:
         if cancel:

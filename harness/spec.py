@@ -31,10 +31,11 @@ else:  # pragma: no cover - Python 3.10
 DEFAULT_STOP_TIME = 2.0
 #: Default communication step of a sweep (s). Sweeps keep only end-of-run metrics, which the
 #: FMU computes exactly whatever the step (its events are located exactly, and a run chopped
-#: into any steps gives the same impacts), so the step only costs time: each step adds a few
-#: microseconds of FMI and core overhead to a point. 0.01 s (200 steps per 2 s run, a 100 Hz
-#: co-simulation) keeps a point within about 1.3x the core's own cost; ``--step`` changes it.
-DEFAULT_SWEEP_STEP = 0.01
+#: into any steps gives the same impacts), so the step only costs time: each step adds about
+#: 15 microseconds of FMI and core overhead to a point. 0.02 s (100 steps per 2 s run, a 50 Hz
+#: co-simulation) keeps a point within about 1.25x the core's own cost (0.1 s: 1.15x, 0.01 s:
+#: 1.35x, 1e-3 s: 3x in CPU time); ``--step`` changes it.
+DEFAULT_SWEEP_STEP = 0.02
 
 
 class UsageError(Exception):
