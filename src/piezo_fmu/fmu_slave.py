@@ -30,12 +30,13 @@ class Variable(NamedTuple):
     """One FMU variable: what the modelDescription says of it and how to read it from the core.
 
     ``unit``, ``min`` and ``max`` are written by :mod:`piezo_fmu.fmu_build` (pythonfmu 0.7.0
-    writes none of them). ``read`` maps a :class:`CoreView` of the core to the output value.
+    writes none of them). ``read`` maps a :class:`CoreView` of the core to an output's value,
+    or the :class:`Simulator` to a calculated parameter's.
     """
 
     name: str
     type: str  # "Real" or "Integer"
-    causality: str  # "parameter", "input" or "output"
+    causality: str  # "parameter", "input", "output" or "calculatedParameter"
     unit: Optional[str]  # None for Integer variables: FMI 2.0 gives Integer no unit
     description: str
     min: Optional[float] = None
@@ -154,11 +155,11 @@ OUTPUTS = (
 CALCULATED = (
     Variable("patch_capacitance", "Real", "calculatedParameter", "F",
              "Capacitance C_p = eps33 W_p L_p / t_p of each barrier's piezoelectric patch (MODEL.md section 5)",
-             min=0.0, read=lambda core: core.sim.barrier.C_p),
+             min=0.0, read=lambda sim: sim.barrier.C_p),
     Variable("contact_frequency", "Real", "calculatedParameter", "rad/s",
              "Undamped angular frequency sqrt(K_eq / mu) of the relative motion in contact, mu the reduced "
              "mass of M - M_eq and m + M_eq (short-circuited patch)",
-             min=0.0, read=lambda core: core.sim.contact_frequency),
+             min=0.0, read=lambda sim: sim.contact_frequency),
 )
 
 #: The whole table, in value-reference order: parameters, inputs, outputs, calculated parameters
@@ -193,14 +194,12 @@ class CoreView:
         self.sim, self.state, self.metrics, self.energy = sim, sim.state, sim.metrics, sim.energy
 
 
-#: Every value read from the core: the outputs, then the calculated parameters.
-_READ = OUTPUTS + CALCULATED
-_READERS = tuple(spec.read for spec in _READ)
+_READERS = tuple(spec.read for spec in OUTPUTS)
 #: Brackets one communication step may need at the least (a few minutes of CPU): a longer step is
 #: refused at once rather than left to run for hours in the host.
 MAX_BRACKETS_PER_STEP = 1e7
 #: Output values before the core exists (bad start values): NaN, and 0 for the Integer.
-_NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in _READ)
+_NO_OUTPUTS = tuple(0 if spec.type == "Integer" else math.nan for spec in OUTPUTS)
 
 
 def on_nanosecond_grid(t: float) -> float:
@@ -251,7 +250,10 @@ class PiezoImpactDamper(Fmi2Slave):
         if spec.causality == "input":
             return scalar_variable(spec, lambda: self._inputs[name],
                                    lambda value: self._set_input(name, value))
-        index = _READ.index(spec)
+        if spec.causality == "calculatedParameter":
+            # Fixed once initialized: read on request, not with every step's outputs.
+            return scalar_variable(spec, lambda: spec.read(sim) if (sim := self._core()) is not None else math.nan)
+        index = OUTPUTS.index(spec)
         return scalar_variable(spec, lambda: (self._outputs or self._read_outputs())[index])
 
     def _set_parameter(self, name: str, value) -> None:
