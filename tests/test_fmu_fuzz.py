@@ -36,7 +36,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import struct
 import subprocess
 import sys
 import textwrap
@@ -55,7 +54,7 @@ from fmpy.logging import addLoggerProxy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from piezo_fmu import EXPLICIT, Parameters, derive_barrier, parameter_info
+from piezo_fmu import EXPLICIT, Parameters, derive_barrier, fmu_build, parameter_info
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
@@ -553,36 +552,6 @@ def test_300_instance_life_cycles_in_one_process_with_heap_checks_exit_cleanly()
     assert growth < 100 * 2**20, f"{growth / 2**20:.1f} MB"
 
 
-def _elf_sections(data: bytes) -> dict:
-    shoff, = struct.unpack_from("<Q", data, 0x28)
-    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x3A)
-    heads = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + i * shentsize) for i in range(shnum)]
-    names = heads[shstrndx][4]
-    return {data[names + h[0]:data.index(b"\0", names + h[0])].decode(): h for h in heads}
-
-
-def exit_functions(binary: bytes) -> tuple[list[int], int | None]:
-    """The addresses the dynamic loader calls at exit (the ``.fini_array`` as far as
-    ``DT_FINI_ARRAYSZ`` reaches) and the address of pythonfmu's ``onLibraryUnload``."""
-    secs = _elf_sections(binary)
-    symtab, strtab = secs[".symtab"], secs[".strtab"]
-    unload = None
-    for off in range(symtab[4], symtab[4] + symtab[5], 24):
-        name, _, _, _, value, _ = struct.unpack_from("<IBBHQQ", binary, off)
-        if b"onLibraryUnload" in binary[strtab[4] + name:binary.index(b"\0", strtab[4] + name)]:
-            unload = value
-    fini = secs[".fini_array"]
-    size = next(value for off in range(secs[".dynamic"][4], secs[".dynamic"][4] + secs[".dynamic"][5], 16)
-                for tag, value in [struct.unpack_from("<qQ", binary, off)] if tag == 28)  # DT_FINI_ARRAYSZ
-    entries = {}
-    rela = secs[".rela.dyn"]
-    for off in range(rela[4], rela[4] + rela[5], 24):
-        where, info, addend = struct.unpack_from("<QQq", binary, off)
-        if info & 0xFFFFFFFF == 8 and fini[3] <= where < fini[3] + fini[5]:  # R_X86_64_RELATIVE
-            entries[(where - fini[3]) // 8] = addend
-    return [entries[i] for i in range(size // 8)], unload
-
-
 def test_the_fmu_binary_does_not_touch_freed_memory_at_process_exit(unzipdir):
     """pythonfmu 0.7.0's binary keeps its interpreter guard in a static
     ``std::shared_ptr<PyState>`` and also resets it from ``onLibraryUnload``, a
@@ -595,7 +564,7 @@ def test_the_fmu_binary_does_not_touch_freed_memory_at_process_exit(unzipdir):
     chunks" (6 of 6 sweeps). The build now drops that entry from ``.fini_array`` (the static's
     destructor already does the work): valgrind is clean and no Dask sweep aborts (0 of 6)."""
     binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.so").read_bytes()
-    called, unload = exit_functions(binary)
+    called, unload, _ = fmu_build.exit_functions(binary)
     assert unload is None or unload not in called, (
         f"onLibraryUnload (0x{unload:x}) is in the exit functions {[hex(a) for a in called]}")
 

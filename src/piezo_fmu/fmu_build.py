@@ -218,19 +218,13 @@ def _elf_sections(data: bytes) -> dict:
     return {data[names + h[0]:data.index(b"\0", names + h[0])].decode(): h for h in heads}
 
 
-def drop_exit_unload(binary: bytes) -> bytes:
-    """pythonfmu 0.7.0's linux64 binary with ``onLibraryUnload`` taken out of its ``.fini_array``.
+def exit_functions(binary: bytes) -> tuple[list[int], Optional[int], int]:
+    """What the dynamic loader calls at exit in an x86-64 ELF shared library.
 
-    The binary keeps its interpreter guard in a static ``std::shared_ptr<PyState>`` and resets it
-    again from ``onLibraryUnload``, a ``__attribute__((destructor))`` function. At process exit
-    ``exit()`` runs the static's destructor first (an atexit handler), then the loader's
-    ``_dl_fini`` runs ``onLibraryUnload``, which releases the freed control block a second time: a
-    use-after-free that corrupts the heap (valgrind; Dask workers abort with "free(): corrupted
-    unsorted chunks"). The static's destructor does all the work, at exit and at ``dlclose``, so
-    the entry is dropped: ``DT_FINI_ARRAYSZ`` shrinks by one slot (the entry is the array's last,
-    and the array runs last to first). Anything else in the table is an error.
+    Returns the addresses in its ``.fini_array`` as far as ``DT_FINI_ARRAYSZ`` reaches, the
+    address of pythonfmu's ``onLibraryUnload`` (None if absent), and the file offset of the
+    ``DT_FINI_ARRAYSZ`` entry. Raises ``ValueError`` when there is no such entry.
     """
-    data = bytearray(binary)
     secs = _elf_sections(binary)
     symtab, strtab = secs[".symtab"], secs[".strtab"]
     unload = None
@@ -247,13 +241,30 @@ def drop_exit_unload(binary: bytes) -> bytes:
     for off in range(dynamic[4], dynamic[4] + dynamic[5], 16):
         tag, size = struct.unpack_from("<qQ", binary, off)
         if tag == 28:  # DT_FINI_ARRAYSZ
-            last = size // 8 - 1
-            if unload is None or entries.get(last) != unload:
-                raise ValueError(f"unexpected exit functions {entries} (onLibraryUnload at {unload}): "
-                                 "not the pythonfmu 0.7.0 binary this mends")
-            struct.pack_into("<qQ", data, off, tag, size - 8)
-            return bytes(data)
+            return [entries.get(i) for i in range(size // 8)], unload, off
     raise ValueError("the binary has no DT_FINI_ARRAYSZ")
+
+
+def drop_exit_unload(binary: bytes) -> bytes:
+    """pythonfmu 0.7.0's linux64 binary with ``onLibraryUnload`` taken out of its ``.fini_array``.
+
+    The binary keeps its interpreter guard in a static ``std::shared_ptr<PyState>`` and resets it
+    again from ``onLibraryUnload``, a ``__attribute__((destructor))`` function. At process exit
+    ``exit()`` runs the static's destructor first (an atexit handler), then the loader's
+    ``_dl_fini`` runs ``onLibraryUnload``, which releases the freed control block a second time: a
+    use-after-free that corrupts the heap (valgrind; Dask workers abort with "free(): corrupted
+    unsorted chunks"). The static's destructor does all the work, at exit and at ``dlclose``, so
+    the entry is dropped: ``DT_FINI_ARRAYSZ`` shrinks by one slot (the entry is the array's last,
+    and the array runs last to first). Anything else in the table is an error.
+    """
+    called, unload, size_at = exit_functions(binary)
+    if unload is None or not called or called[-1] != unload:
+        raise ValueError(f"unexpected exit functions {called} (onLibraryUnload at {unload}): "
+                         "not the pythonfmu 0.7.0 binary this mends")
+    data = bytearray(binary)
+    tag, size = struct.unpack_from("<qQ", binary, size_at)
+    struct.pack_into("<qQ", data, size_at, tag, size - 8)
+    return bytes(data)
 
 
 def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
