@@ -30,6 +30,7 @@ from fmpy.validation import validate_fmu
 from piezo_fmu import Parameters, Simulator, parameter_info
 from piezo_fmu import fmu_build
 from piezo_fmu.fmu_slave import OUTPUTS, CoreView
+from fmu_host import read_outputs, set_values
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / fmu_build.DEFAULT_DEST
@@ -93,19 +94,10 @@ class Host:
         return [(status, message) for name, status, message in LOG if name == self.name]
 
     def set(self, **values) -> None:
-        for name, value in values.items():
-            v = self.variables[name]
-            if v.type == "Integer":
-                self.fmu.setInteger([v.valueReference], [int(value)])
-            else:
-                self.fmu.setReal([v.valueReference], [float(value)])
+        set_values(self.fmu, self.variables, **values)
 
     def outputs(self) -> dict:
-        reals = [v for v in self.variables.values() if v.causality == "output" and v.type == "Real"]
-        ints = [v for v in self.variables.values() if v.causality == "output" and v.type == "Integer"]
-        values = dict(zip((v.name for v in reals), self.fmu.getReal([v.valueReference for v in reals])))
-        values.update(zip((v.name for v in ints), self.fmu.getInteger([v.valueReference for v in ints])))
-        return values
+        return read_outputs(self.fmu, self.variables)
 
     def step(self, h: float) -> None:
         t_next = (self.n + 1) * h

@@ -62,6 +62,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import long_run  # noqa: E402
 # Hang escapes the slave's ``except Exception``, so pythonfmu reports fmi2Fatal and fmpy raises:
 # a hang inside the FMU fails the test instead of blocking it.
+from fmu_host import read_outputs, set_values, write_record  # noqa: E402
+from test_properties import chops  # noqa: E402
 from test_reliability import Hang, time_limit  # noqa: E402
 
 COUNTS: dict = {"fuzz_examples": 0, "fuzz_steps": 0, "chop_examples": 0, "bad_values_tried": 0,
@@ -72,9 +74,7 @@ EPS = 2.220446049250313e-16
 @pytest.fixture(scope="module", autouse=True)
 def record_counts():
     yield
-    folder = ROOT / "build" / "reliability"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "fmu.json").write_text(json.dumps(COUNTS, indent=1) + "\n")
+    write_record("fmu", COUNTS)
     print(f"\n[reliability/fmu] {json.dumps(COUNTS)}")
 
 
@@ -134,12 +134,7 @@ class Host:
         self.t = 0.0
 
     def set(self, **values) -> None:
-        for name, value in values.items():
-            v = self.variables[name]
-            if v.type == "Integer":
-                self.fmu.setInteger([v.valueReference], [int(value)])
-            else:
-                self.fmu.setReal([v.valueReference], [float(value)])
+        set_values(self.fmu, self.variables, **values)
 
     def step_to(self, t_next: float, y: float = 0.0, v: float = 0.0) -> None:
         self.set(base_displacement=y, base_velocity=v)
@@ -147,11 +142,7 @@ class Host:
         self.t = t_next
 
     def outputs(self) -> dict:
-        reals = [v for v in self.variables.values() if v.causality == "output" and v.type == "Real"]
-        ints = [v for v in self.variables.values() if v.causality == "output" and v.type == "Integer"]
-        values = dict(zip((v.name for v in reals), self.fmu.getReal([v.valueReference for v in reals])))
-        values.update(zip((v.name for v in ints), self.fmu.getInteger([v.valueReference for v in ints])))
-        return values
+        return read_outputs(self.fmu, self.variables)
 
 
 @pytest.fixture(scope="module")
@@ -250,16 +241,6 @@ def test_random_damper_inputs_and_steps_through_the_fmu(host, md, values, base, 
     assert abs(out["energy_balance_error"]) <= ledger_bound(values, out, t, y_end), (kind, out)
 
 
-def chopped(duration: float, sizes: list[float]) -> list[float]:
-    times, t = [], 0.0
-    for size in sizes:
-        t += size
-        if t >= duration:
-            break
-        times.append(t)
-    return times + [duration]
-
-
 @settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture], deadline=None,
           max_examples=max(1, settings().max_examples // 5))
 @given(values=dampers(), sizes=st.lists(st.floats(1e-6, 0.05), min_size=1, max_size=30))
@@ -268,7 +249,7 @@ def test_random_chop_of_time_through_the_fmu_changes_nothing_with_the_base_at_re
     duration = 0.25
     with time_limit(20.0, "chop example"):
         host.start(values)
-        for t in chopped(duration, sizes):
+        for t in chops(sizes, duration):
             host.step_to(t)
         pieces = host.outputs()
         host.start(values)

@@ -54,6 +54,7 @@ from piezo_fmu.propagation import THETA
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import long_run  # noqa: E402
+from fmu_host import write_record  # noqa: E402
 from test_properties import assert_momentum_exact_at_switches  # noqa: E402
 
 COUNTS: dict = {"bad_values_tried": 0, "bad_values_by_kind": {}, "events_per_second": []}
@@ -65,9 +66,7 @@ INTEGER_PARAMETERS = [name for name, info in INFO.items() if type(info["default"
 @pytest.fixture(scope="module", autouse=True)
 def record_counts():
     yield
-    folder = ROOT / "build" / "reliability"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "core.json").write_text(json.dumps(COUNTS, indent=1) + "\n")
+    write_record("core", COUNTS)
     print(f"\n[reliability/core] bad values tried: {COUNTS['bad_values_tried']} {COUNTS['bad_values_by_kind']}")
     for row in COUNTS["events_per_second"]:
         print("[reliability/core] " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"

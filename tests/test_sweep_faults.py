@@ -28,6 +28,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from fmu_host import write_record
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
@@ -39,9 +40,7 @@ FAULTS: list = []
 @pytest.fixture(scope="module", autouse=True)
 def record_faults():
     yield
-    folder = ROOT / "build" / "reliability"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "sweeps.json").write_text(json.dumps(FAULTS, indent=1) + "\n")
+    write_record("sweeps", FAULTS)
     for fault in FAULTS:
         print(f"\n[reliability/sweeps] {fault}", end="")
     print()

@@ -1,0 +1,38 @@
+"""Helpers shared by the test modules that drive the FMU or record reliability counts.
+
+No side effects at import (unlike the test modules, which register fmpy loggers).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Where the reliability tests leave what they counted (bad values tried, faults injected).
+RELIABILITY_DIR = ROOT / "build" / "reliability"
+
+
+def set_values(fmu, variables: dict, **values) -> None:
+    """Set FMU variables by name (``variables``: name -> fmpy ScalarVariable), Integer or Real."""
+    for name, value in values.items():
+        v = variables[name]
+        if v.type == "Integer":
+            fmu.setInteger([v.valueReference], [int(value)])
+        else:
+            fmu.setReal([v.valueReference], [float(value)])
+
+
+def read_outputs(fmu, variables: dict) -> dict:
+    """Every output of the FMU now, by name."""
+    reals = [v for v in variables.values() if v.causality == "output" and v.type == "Real"]
+    ints = [v for v in variables.values() if v.causality == "output" and v.type == "Integer"]
+    values = dict(zip((v.name for v in reals), fmu.getReal([v.valueReference for v in reals])))
+    values.update(zip((v.name for v in ints), fmu.getInteger([v.valueReference for v in ints])))
+    return values
+
+
+def write_record(name: str, data) -> None:
+    """Write what a reliability module counted to ``build/reliability/<name>.json``."""
+    RELIABILITY_DIR.mkdir(parents=True, exist_ok=True)
+    (RELIABILITY_DIR / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
