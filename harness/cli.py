@@ -61,10 +61,16 @@ def _parser() -> argparse.ArgumentParser:
         sub.add_argument("--fmu", type=Path, default=None,
                          help="the FMU (default $PIEZO_FMU or fmus/PiezoImpactDamper.fmu)")
 
+    def results_folder(sub, name: str) -> None:
+        sub.add_argument("--out", type=Path, default=Path("results") / name, metavar="DIR",
+                         help=f"results folder (default results/{name})")
+
+    def jobs(sub) -> None:
+        sub.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+
     nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series, summary, figures")
     common(nominal, 1e-4, "the time series' sampling")
-    nominal.add_argument("--out", type=Path, default=Path("results") / "nominal", metavar="DIR",
-                         help="results folder (default results/nominal)")
+    results_folder(nominal, "nominal")
 
     sweep = commands.add_parser(
         "sweep", help="a sweep over FMU parameters (Figs. 4-9)",
@@ -80,8 +86,7 @@ def _parser() -> argparse.ArgumentParser:
                        help="grids and values from a TOML file ([grid], [set], stop_time, step, out)")
     sweep.add_argument("--out", type=Path, default=None, metavar="DIR",
                        help="results folder (default results/PRESET for a preset)")
-    sweep.add_argument("--jobs", type=int, default=None, metavar="N",
-                       help="worker processes (default: all cores)")
+    jobs(sweep)
     where = sweep.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
     where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
@@ -95,8 +100,7 @@ def _parser() -> argparse.ArgumentParser:
 
     two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
     common(two, 1e-4, "the time series' sampling")
-    two.add_argument("--out", type=Path, default=Path("results") / "two-designs", metavar="DIR",
-                     help="results folder (default results/two-designs)")
+    results_folder(two, "two-designs")
 
     load = commands.add_parser(
         "load-sweep", help="harvested energy per impact and average power against the load R (circuit models)",
@@ -113,9 +117,8 @@ def _parser() -> argparse.ArgumentParser:
     load.add_argument("--impact-step", type=float, default=None, metavar="S",
                       help="sampling of the single-impact figures, s (default 1e-6)")
     load.add_argument("--no-impact", action="store_true", help="skip the single-impact figures")
-    load.add_argument("--out", type=Path, default=Path("results") / "load-sweep", metavar="DIR",
-                      help="results folder (default results/load-sweep)")
-    load.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+    results_folder(load, "load-sweep")
+    jobs(load)
 
     impact = commands.add_parser(
         "impact-voltage", help="the voltage of the first impact under the voltage models, sampled finely",
@@ -127,8 +130,7 @@ def _parser() -> argparse.ArgumentParser:
     impact.add_argument("--models", default="0,1,2", metavar="LIST",
                         help="voltage models, comma-separated: 0 quasi-static, 1 circuit one-way, 2 coupled "
                              "(default 0,1,2)")
-    impact.add_argument("--out", type=Path, default=Path("results") / "impact-voltage", metavar="DIR",
-                        help="results folder (default results/impact-voltage)")
+    results_folder(impact, "impact-voltage")
 
     commands.add_parser("presets", help="list the built-in sweeps")
     return parser

@@ -9,6 +9,7 @@ come back in the order they finish, as JSON-safe records.
 - :class:`DaskCluster`: a ``distributed`` cluster, given by its scheduler address or started
   locally. The FMU travels to the workers as bytes (scattered once), so remote workers need
   only this package and fmpy installed, not the file.
+- :class:`InProcess`: one after another on one instance in this process (``--jobs 1``).
 """
 
 from __future__ import annotations
@@ -67,6 +68,22 @@ def _chunks(items: list, jobs: int) -> list[list]:
     (about 16 per worker), few enough that a task's round trip is small beside its work."""
     size = max(1, min(8, len(items) // (16 * max(1, jobs))))
     return [items[i:i + size] for i in range(0, len(items), size)]
+
+
+class InProcess:
+    """Points run one after another on one instance in this process (``--jobs 1``)."""
+
+    description = "this process"
+
+    def __init__(self, instance: Instance):
+        self.instance = instance
+
+    def run(self, todo: Iterable[tuple]) -> Iterator[tuple]:
+        for tag, index, values, stop_time, step in todo:
+            yield tag, self.instance.run_point(index, values, stop_time, step)
+
+    def close(self, cancel: bool = False) -> None:
+        pass
 
 
 class ProcessPool:

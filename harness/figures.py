@@ -36,6 +36,14 @@ def _plt():
     return plt
 
 
+def _save(fig, path: Path) -> Path:
+    """Lay out ``fig``, write it to ``path`` (PNG, 130 dpi), close it; return ``path``."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    _plt().close(fig)
+    return path
+
+
 def axis_scale(units: str) -> tuple[float, str]:
     """Factor and unit to show a parameter in (metres as millimetres)."""
     return UNIT_DISPLAY.get(units, (1.0, units))
@@ -140,11 +148,7 @@ def sweep_figures(ds, zones: dict, paper_zone: Optional[dict], folder: Path) -> 
         fig, ax = plt.subplots(figsize=(6.2, 4.6))
         draw_panel(ax, ds, metric, zones.get(zone_of), paper_zone,
                    f"{METRIC_DISPLAY[metric][2]}: sweep {ds.attrs.get('sweep')} ({_subtitle(ds)})")
-        fig.tight_layout()
-        path = Path(folder) / f"{metric}.png"
-        fig.savefig(path, dpi=130)
-        plt.close(fig)
-        written.append(path)
+        written.append(_save(fig, Path(folder) / f"{metric}.png"))
     return written
 
 
@@ -163,11 +167,7 @@ def paper_figures(panels: dict, folder: Path) -> list[Path]:
         fig.suptitle(f"{figure.replace('fig', 'Fig. ')}: {METRIC_DISPLAY[metric][2]}"
                      + {"DI": "; vibratory-based zone", "V_rms": "; energy-based zone",
                         "perfectibility": "; design zones"}.get(zone_of or "", ""), fontsize=11)
-        fig.tight_layout()
-        path = Path(folder) / f"{figure}.png"
-        fig.savefig(path, dpi=130)
-        plt.close(fig)
-        written.append(path)
+        written.append(_save(fig, Path(folder) / f"{figure}.png"))
     return written
 
 
@@ -182,10 +182,7 @@ def nominal_figures(t, with_damper: dict, without_damper: dict, folder: Path, ti
     ax.set_title(f"Fig. 3(a): main mass with and without the damper ({title})", fontsize=9)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    a = Path(folder) / "fig3a.png"
-    fig.savefig(a, dpi=130)
-    plt.close(fig)
+    a = _save(fig, Path(folder) / "fig3a.png")
 
     fig, axes = plt.subplots(2, 1, figsize=(7.5, 5.2), sharex=True)
     for ax, side, color in zip(axes, ("left", "right"), ("C1", "C2")):
@@ -194,11 +191,7 @@ def nominal_figures(t, with_damper: dict, without_damper: dict, folder: Path, ti
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(f"Fig. 3(b): output voltage of each piezoelectric barrier ({title})", fontsize=9)
-    fig.tight_layout()
-    b = Path(folder) / "fig3b.png"
-    fig.savefig(b, dpi=130)
-    plt.close(fig)
-    return [a, b]
+    return [a, _save(fig, Path(folder) / "fig3b.png")]
 
 
 def two_designs_figure(t, runs: dict, folder: Path, title: str) -> Path:
@@ -218,11 +211,7 @@ def two_designs_figure(t, runs: dict, folder: Path, title: str) -> Path:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(1.1, -0.14), ncol=2, frameon=False)
     fig.suptitle(f"Fig. 10: designed vs poor piezo-impact damper ({title})", fontsize=11)
-    fig.tight_layout()
-    path = Path(folder) / "fig10.png"
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return _save(fig, Path(folder) / "fig10.png")
 
 
 def load_sweep_figure(rows: list[dict], summary: dict, folder: Path) -> Path:
@@ -263,11 +252,7 @@ def load_sweep_figure(rows: list[dict], summary: dict, folder: Path) -> Path:
     axes[-1].set_xlabel("load resistance $R$ (Ω)")
     axes[0].set_title(f"Load sweep: {summary['duration_s']:g} s from the nominal release per point "
                       f"({len(summary['loads_ohm'])} loads)", fontsize=9)
-    fig.tight_layout()
-    path = Path(folder) / "load_sweep.png"
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return _save(fig, Path(folder) / "load_sweep.png")
 
 
 def ohms(value: float, unit: str = "Ω") -> str:
@@ -312,8 +297,4 @@ def impact_figure(series: dict, side: str, load: float, label: str, path: Path) 
                      else "open-circuit voltage (independent of the load)", fontsize=9)
     axes[-1, 0].set_xlabel("time (ms)")
     fig.suptitle(f"First impact: voltage under the voltage models, $R$ = {ohms(load)}", fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return _save(fig, Path(path))

@@ -28,11 +28,12 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Optional
 
 import numpy as np
 from fmpy.fmi1 import FMICallException
 
+from .engine import InProcess, ProcessPool
 from .figures import ohms
 from .fmu import FmuModel, FmuRunError, Instance
 from .nominal import write_csv
@@ -148,22 +149,6 @@ def end_slopes(loads, values) -> dict:
 
 # -- the load sweep --------------------------------------------------------------------------------
 
-class InlineBackend:
-    """Points run one after another on one instance in this process (``--jobs 1``)."""
-
-    description = "this process"
-
-    def __init__(self, instance: Instance):
-        self.instance = instance
-
-    def run(self, todo: Iterable[tuple]):
-        for tag, index, values, stop_time, step in todo:
-            yield tag, self.instance.run_point(index, values, stop_time, step)
-
-    def close(self, cancel: bool = False) -> None:
-        pass
-
-
 def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance, models=DEFAULT_MODELS,
                    loads=None, stop_time: float = DEFAULT_STOP_TIME, step: float = DEFAULT_SWEEP_STEP,
                    overrides: Optional[dict] = None, jobs: int = 1) -> dict:
@@ -185,12 +170,7 @@ def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance
             for m in models for i, r in enumerate((*loads, nominal_load))]
     todo.sort(key=lambda item: (-item[0], item[2]["R_load"]))
     begin = time.perf_counter()
-    if jobs > 1:
-        from .engine import ProcessPool
-
-        backend = ProcessPool(model, unzipdir, min(jobs, len(todo)))
-    else:
-        backend = InlineBackend(instance)
+    backend = ProcessPool(model, unzipdir, min(jobs, len(todo))) if jobs > 1 else InProcess(instance)
     records = {}
     try:
         for tag, record in backend.run(todo):
