@@ -35,6 +35,11 @@ STATE_TERMS = ORDER + 1
 #: Coefficients of the primitive of a squared bracket polynomial (degree 2 ORDER + 1).
 PRIMITIVE_TERMS = 2 * ORDER + 2
 _LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
+#: The series is built by doubling (``LinearPhase``) up to the first power of 2 above ORDER.
+_DOUBLED = 1 << ORDER.bit_length()
+#: ``1 / C(m + j, m)`` for j < m, m a power of 2.
+_INVERSE_BINOMIALS = {1 << i: np.array([1.0 / math.comb((1 << i) + j, j) for j in range(1 << i)])[:, None, None]
+                      for i in range(ORDER.bit_length())}
 
 
 class LinearPhase:
@@ -53,15 +58,38 @@ class LinearPhase:
         #: than MAX_BRACKET, so that ``tau**ORDER`` stays finite for a phase that barely moves.
         self.h = THETA / rho if rho > THETA / MAX_BRACKET else MAX_BRACKET
         n = self.A.shape[0]
-        terms = np.empty((ORDER + 1, n, n))
+        terms = np.empty((_DOUBLED, n, n))
         terms[0] = np.eye(n)
-        for k in range(1, ORDER + 1):
-            terms[k] = terms[k - 1] @ self.A / k
+        # A^k / k! by doubling: with the first m terms, A^(m+j) / (m+j)! = (A^m / m!) (A^j / j!) / C(m+j, m).
+        m = 1
+        while m <= ORDER:
+            top = terms[m - 1] @ (self.A / m)
+            np.matmul(top, terms[:m], out=terms[m:2 * m])
+            terms[m:2 * m] *= _INVERSE_BINOMIALS[m]
+            m *= 2
         # (A^k / k!) stacked so that one product gives every Taylor coefficient of x.
+        self._set_terms(terms[:ORDER + 1])
+
+    def _set_terms(self, terms: np.ndarray) -> None:
         self._terms = terms
-        self._flat_terms = terms.reshape(-1, n)  # one matrix-vector product for all of them
+        self._flat_terms = terms.reshape(-1, terms.shape[1])  # one matrix-vector product for all of them
         #: ``h^k``, the scaling of the coefficients on a whole bracket (the usual case).
         self._scale_h = (self.h ** _K)[:, None]
+
+    def mirrored(self, signs: np.ndarray) -> "LinearPhase":
+        """The phase of ``S A S``, ``S = diag(signs)`` (entries +-1): the same flow seen in the
+        coordinates ``S x``, made by exact sign changes instead of a new series."""
+        flips = np.outer(signs, signs)
+        mirror = object.__new__(LinearPhase)
+        mirror.A, mirror.h = self.A * flips, self.h
+        mirror._set_terms(self._terms * flips)
+        return mirror
+
+    @property
+    def bracket_terms(self) -> np.ndarray:
+        """``(A h)^k / k!``, shape (ORDER+1, n, n): the Taylor coefficients of a whole bracket are
+        ``bracket_terms @ x``."""
+        return self._terms * self._scale_h[:, :, None]
 
     def coefficients(self, x: np.ndarray, tau: float) -> np.ndarray:
         """Taylor coefficients ``c`` with ``x(t0 + s tau) = sum_k c[k] s^k``, shape (ORDER+1, n)."""

@@ -68,24 +68,13 @@ def _sign_pattern(b: np.ndarray) -> tuple[int, int, int]:
     return int(np.count_nonzero(signs[1:] != signs[:-1])), int(signs[0]), int(signs[-1])
 
 
-def has_no_root(b: np.ndarray) -> bool:
-    """True when the Bernstein coefficients prove there is no root in the open interval."""
-    return bool(b.min() > 0.0 or b.max() < 0.0)
-
-
-def may_cross(B: np.ndarray) -> list[bool]:
-    """For each row of Bernstein coefficients: False when all of them have one strict sign, which
-    proves that the polynomial has no root on ``[0, 1]``; True otherwise (:func:`crossings` then
-    decides). One pass over all the event functions of a bracket: most need no call of their own."""
-    return [not (lo > 0.0 or hi < 0.0) for lo, hi in zip(B.min(axis=1).tolist(), B.max(axis=1).tolist())]
-
-
 def bernstein(a: np.ndarray) -> np.ndarray:
     """Bernstein coefficients on [0, 1] of power coefficients ``a`` (last axis)."""
     return a @ _TO_BERNSTEIN
 
 
-def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise: float = 0.0) -> list[float]:
+def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise: float = 0.0,
+              values: list[float] | None = None) -> list[float]:
     """All ``s`` in ``(0, 1]`` where the polynomial ``a`` changes sign in ``direction``.
 
     Parameters
@@ -96,14 +85,28 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
     noise : the rounding level of the function's values; a Bernstein coefficient within it
         counts as zero, so a function that is zero to rounding has no sign changes (rounding
         noise would otherwise look like a swarm of roots).
+    values : ``b`` as a list of floats, when already made.
 
     A root exactly at ``s = 0`` is never reported (it belongs to the previous bracket); one
     exactly at ``s = 1`` is.
     """
     if b is None:
         b = bernstein(a)
-    if has_no_root(b[1:]) and (b[0] == 0.0 or np.sign(b[0]) == np.sign(b[1])):
-        return []
+    # The whole bracket first, on Python floats: it almost always has no sign change of the
+    # requested kind, or exactly one, which needs no subdivision.
+    if values is None:
+        values = b.tolist()
+    inner_lo, inner_hi, start = min(values[1:]), max(values[1:]), values[0]
+    if inner_lo > 0.0 and start >= 0.0 or inner_hi < 0.0 and start <= 0.0:
+        return []  # one strict sign after the start, which is zero or of that sign too
+    variations, first, last, f_lo, f_hi = _pattern(values, noise)
+    if variations < 2:
+        found = []
+        if variations and first == -direction and last == direction:
+            found.append(_refine(a.tolist(), 0.0, 1.0, direction, f_lo, f_hi))
+        if f_hi == 0.0 and last == -direction:
+            found.append(1.0)  # a root exactly at the right end
+        return found
     if noise > 0.0:
         b = np.where(np.abs(b) <= noise, 0.0, b)
     coefficients = a.tolist()
@@ -130,6 +133,26 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
         if piece[-1] == 0.0 and last == -direction:
             found.append(hi)
     return found
+
+
+def _pattern(b: list[float], noise: float) -> tuple[int, int, int, float, float]:
+    """:func:`_sign_pattern` of Bernstein coefficients given as floats, those within ``noise`` of
+    zero counted as zero; and the first and last coefficients so counted."""
+    variations = first = last = 0
+    for value in b:
+        if value > noise:
+            sign = 1
+        elif value < -noise:
+            sign = -1
+        else:
+            continue
+        if not first:
+            first = sign
+        elif sign != last:
+            variations += 1
+        last = sign
+    f_lo, f_hi = b[0], b[-1]
+    return variations, first, last, (f_lo if abs(f_lo) > noise else 0.0), (f_hi if abs(f_hi) > noise else 0.0)
 
 
 def _refine(a: list[float], lo: float, hi: float, direction: int, f_lo: float, f_hi: float) -> float:

@@ -17,6 +17,7 @@ every contact bracket (``circuit.py``); under 2 it is also a column of the conta
 from __future__ import annotations
 
 import math
+import operator
 from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
@@ -29,7 +30,7 @@ from .metrics import MetricAccumulators, Metrics
 from .parameters import COUPLED, Parameters
 from .propagation import (MIN_BRACKET, POWERS_AT_START, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers,
                           primitive, primitive_of_square)
-from .roots import bernstein, crossings, may_cross
+from .roots import _TO_BERNSTEIN, crossings
 
 FREE = 0
 RIGHT = +1
@@ -153,6 +154,8 @@ class EnergyLedger(NamedTuple):
 
 
 _MAXIMUM, _PEAK, _VOLTAGE_PEAK = 0, 1, 2
+#: ``1 / (j + k + 1)``: the integrals over [0, 1] of products of powers (``Simulator._booked_ledger``).
+_HILBERT = 1.0 / (np.arange(STATE_TERMS)[:, None] + np.arange(STATE_TERMS)[None, :] + 1.0)
 
 
 @dataclass
@@ -163,7 +166,8 @@ class _Bracket:
     (normalised time ``s`` in [0, 1]); ``base`` (m) and ``v`` (m/s) are the base there. The
     phase switches at ``s_switch`` (inf: not in this bracket) to side ``switch_to``; ``events``
     are the non-terminal events ``(s, kind)`` still ahead; ``s`` is where the state stands.
-    ``ledger`` holds the primitives of the ledger's rates over the bracket.
+    ``rates`` holds the ledger's rates over the bracket (``_ledger_rates``), and ``ledger``
+    their primitives once the ledger of the open bracket has been read.
     """
 
     c: np.ndarray
@@ -176,13 +180,14 @@ class _Bracket:
     switch_to: int = FREE
     events: list = field(default_factory=list)
     delta: np.ndarray | None = None
+    rates: np.ndarray | None = None
     ledger: np.ndarray | None = None
     #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
     powers: np.ndarray = field(default_factory=lambda: POWERS_AT_START)
 
     def to_dict(self) -> dict:
         data = asdict(self)
-        for name in ("c", "delta", "ledger", "powers"):
+        for name in ("c", "delta", "rates", "ledger", "powers"):
             value = getattr(self, name)
             data[name] = None if value is None else value.tolist()
         data["events"] = [list(e) for e in self.events]
@@ -191,17 +196,47 @@ class _Bracket:
     @classmethod
     def from_dict(cls, data: dict) -> "_Bracket":
         data = dict(data)
-        for name in ("c", "delta", "ledger", "powers"):
+        for name in ("c", "delta", "rates", "ledger", "powers"):
             if data[name] is not None:
                 data[name] = np.array(data[name], dtype=float)
-        if data["delta"] is not None:
-            # Made as a column of the (terms, 3) matrix of event functions: restored with the same
-            # strides, so that the dot products that evaluate it round alike (bit-identical peaks).
-            columns = np.zeros((data["delta"].size, 3))
-            columns[:, 0] = data["delta"]
-            data["delta"] = columns[:, 0]
         data["events"] = [(float(s), int(k)) for s, k in data["events"]]
         return cls(**data)
+
+
+class _BracketMaps:
+    """The linear maps a bracket of one phase needs from its start state ``x``, stacked so that
+    one product ``stacked @ x`` gives them all:
+
+    - the Taylor coefficients of the state (ORDER+1 rows of n);
+    - the power and the Bernstein coefficients of the three event functions (``functionals``,
+      with the base velocity left out of ``p'``), ORDER+1 each;
+    - the power coefficients of the ledger's rates (``Simulator._ledger_rates``): ``u'``,
+      ``delta'`` (zero in free flight) and ``K u + C u'``.
+    """
+
+    def __init__(self, phase: LinearPhase, functionals: np.ndarray, rates: np.ndarray):
+        self.phase = phase
+        terms = phase.bracket_terms  # (k, i, j)
+        n = terms.shape[1]
+        power = (np.concatenate([functionals, rates], axis=1).T @ terms).transpose(1, 0, 2)  # (row, k, j)
+        bernstein_rows = _TO_BERNSTEIN.T @ power[:3]
+        self.stacked = np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)])
+        events = 3 * STATE_TERMS
+        self.split = (STATE_TERMS * n, STATE_TERMS * n + events, STATE_TERMS * n + 2 * events)
+        #: Rows (one per event function) of ``sum_i |functional_i| max_k |terms_k[i, j]|``: with the
+        #: sizes ``|x_j|`` of the start state, a bound on the state terms an event function is made of.
+        self.noise_rows = (np.abs(functionals).T @ np.abs(terms).max(axis=0)).tolist()
+
+    def mirrored(self, phase: LinearPhase, signs: np.ndarray) -> "_BracketMaps":
+        """The maps of the other barrier: its phase is this one's mirrored by ``signs``
+        (``LinearPhase.mirrored``), and its event functions ``delta`` and ``delta'`` are this one's
+        in the mirrored state, negated (``_event_functionals``); the rates are the same."""
+        mirror = object.__new__(_BracketMaps)
+        mirror.phase, mirror.split, mirror.noise_rows = phase, self.split, self.noise_rows
+        events = np.repeat([-1.0, -1.0, 1.0], STATE_TERMS)
+        rows = np.concatenate([np.tile(signs, STATE_TERMS), events, np.ones(3 * STATE_TERMS), events])
+        mirror.stacked = self.stacked * rows[:, None] * signs
+        return mirror
 
 
 @dataclass
@@ -246,14 +281,17 @@ class Simulator:
         coupling = None
         if self._vm == COUPLED:
             coupling = (self.barrier.chi, self.barrier.C_p, params.R_load)
-        self._contact = {side: LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, side,
-                                                           coupling))
-                         for side in (RIGHT, LEFT)}
+        right = LinearPhase(_contact_matrix(self._M_contact, self._m_contact, K, C, K_eq, C_eq, params.d, RIGHT, coupling))
+        # The left barrier is the right one seen with the signs of the constant (and the voltage)
+        # turned over: exact sign changes, not a second series.
+        self._contact = {RIGHT: right, LEFT: right.mirrored(_mirror_signs(right.A.shape[0]))}
         _check_time_scales(params, self._free, self._contact[RIGHT])
         self._zero = _ZERO * params.d
-        self._functionals = {side: _event_functionals(side, params.d, self._contact[RIGHT].A.shape[0] if side else 5)
-                             for side in (FREE, RIGHT, LEFT)}
-        self._magnitudes: dict[int, np.ndarray] = {}  # |functionals|, kept by _event_maps
+        n = right.A.shape[0]
+        self._maps = {side: _BracketMaps(self._free if side == FREE else right, _event_functionals(side, params.d, 5 if side == FREE else n),
+                                         _ledger_rates(side, K, C, 5 if side == FREE else n))
+                      for side in (FREE, RIGHT)}
+        self._maps[LEFT] = self._maps[RIGHT].mirrored(self._contact[LEFT], _mirror_signs(n))
         if self._vm:
             self._RC = params.R_load * self.barrier.C_p
             # Per barrier (index (side + 1) // 2: left 0, right 1): the voltage booked at time
@@ -371,7 +409,7 @@ class Simulator:
             potential_Keq = 0.5 * self.barrier.K_eq * delta**2
         a = self._accounts
         br = self._bracket
-        open_C, open_Ceq, open_base = br.powers @ br.ledger if br else (0.0, 0.0, 0.0)
+        open_C, open_Ceq, open_base = self._open_ledger(br) if br else (0.0, 0.0, 0.0)
         if not self._vm:
             return EnergyLedger(kinetic=kinetic, potential_K=0.5 * p.K * (self._p - self._y) ** 2,
                                 potential_Keq=potential_Keq, dissipated_C=a.dissipated_C + open_C,
@@ -475,95 +513,84 @@ class Simulator:
     def _open_bracket(self) -> "_Bracket":
         """A new bracket from the present state, with every event on it located."""
         side, y, v = self._side, self._y, self._v
-        phase = self._free if side == FREE else self._contact[side]
-        x = np.array([self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0])
-        if side != FREE and self._vm:
-            if self._vm == COUPLED:
-                x = np.append(x, self._circuit_V[(side + 1) // 2])
-            c = phase.coefficients(x, phase.h)
-            self._piece = self._contact_piece(c, phase.h, side)
-        else:
-            c = phase.coefficients(x, phase.h)
-        # The largest size of each state column: the rounding level of the event functions below,
-        # and (NaN and inf propagate through it) the test that the bracket is finite.
-        column_size = np.abs(c).max(axis=0)
-        if not np.isfinite(column_size).all():
+        maps = self._maps[side]
+        phase = maps.phase
+        xs = [self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0]
+        if side != FREE and self._vm == COUPLED:
+            xs.append(self._circuit_V[(side + 1) // 2])
+        x = np.array(xs)
+        # One product gives the Taylor coefficients of the state, and the power and Bernstein
+        # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
+        z = maps.stacked @ x
+        if not math.isfinite(z @ z):
             # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
             raise ValueError(f"y = {y!r} m, v = {v!r} m/s at t = {self.t!r} s: the state (p = {self._p!r} m, "
                              f"q = {self._q!r} m, p' = {self._dp!r} m/s, q' = {self._dq!r} m/s) overflows double "
                              "precision on the next bracket; allowed range: base and state well below 1e150")
-        br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, ledger=self._ledger_integrands(c, phase.h, side, v))
-        # Event functions as linear maps of the state: columns of G, Bernstein rows of B, and
-        # the rounding level of each (a few ulp of the state terms that make it up).
-        functionals, magnitudes = self._event_maps(side, v)
-        G = c @ functionals
-        B = bernstein(G.T)
-        noise = _NOISE_ULPS * EPS * (column_size @ magnitudes)
+        split = maps.split
+        c, G, rates, B = (z[:split[0]].reshape(STATE_TERMS, -1), z[split[0]:split[1]].reshape(3, -1),
+                          z[split[1]:split[2]].reshape(3, -1), z[split[2]:].reshape(3, -1))
+        if v != 0.0:
+            G[2, 0] += v
+            B[2] += v
+        if side != FREE and self._vm:
+            self._piece = self._contact_piece(c, phase.h, side)
+        br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, rates=rates)
+        # The rounding level of each event function: a few ulp of the largest state terms that
+        # make it up, bounded from the start state.
+        sizes = [abs(value) for value in xs]
+        noise = [_NOISE_ULPS * EPS * sum(map(operator.mul, row, sizes)) for row in maps.noise_rows]
+        noise[2] += _NOISE_ULPS * EPS * abs(v)
         n_terminal = 2 if side == FREE else 1
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
-        # Most event functions have no sign change on a bracket: one test of all of them first.
-        may = may_cross(B)
+        values = B.tolist()
         for j in range(n_terminal):
-            g, b = G[:, j], B[j]
-            if abs(g[0]) <= max(self._zero, noise[j]):
+            g, b, row = G[j], B[j], values[j]
+            start_value = row[0]  # the first Bernstein coefficient is the value at the start
+            if abs(start_value) <= max(self._zero, noise[j]):
                 # At a switch the function that fired is zero to rounding: its sign just after
                 # the start is that of the relative velocity towards the barrier. When that is
                 # zero to rounding too (a body coming to rest on a barrier), the relative
                 # acceleration without the barrier's force decides. Both tests read the same
                 # state the same way in either phase, so the phases cannot hand over to each
                 # other forever at one instant.
-                g = g.copy()
-                g[0] = 0.0
                 barrier = targets[j] if side == FREE else side
-                rate = barrier * (x[DW] - x[DU])
-                if abs(rate) > _NOISE_ULPS * EPS * (abs(x[DW]) + abs(x[DU])):
-                    start = int(np.sign(rate))
+                rate = barrier * (xs[DW] - xs[DU])
+                if abs(rate) > _NOISE_ULPS * EPS * (sizes[DW] + sizes[DU]):
+                    start = 1 if rate > 0.0 else -1
                 else:
-                    start = self._approach_sign(x, barrier)
+                    start = self._approach_sign(xs, barrier)
                 if start == direction:
                     br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
-                b = bernstein(g)
-            elif not may[j]:
-                continue
-            roots = crossings(g, direction, b, noise[j])
+                # The start value set to zero: every Bernstein coefficient holds it with weight 1.
+                g = g.copy()
+                g[0] = 0.0
+                b = b - start_value
+                row = [value - start_value for value in row]
+            elif min(row) > 0.0 or max(row) < 0.0:
+                continue  # one strict sign: no root (most event functions on most brackets)
+            roots = crossings(g, direction, b, noise[j], row)
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], targets[j]
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
-        events = [(s, _MAXIMUM) for s in crossings(G[:, 2], -1, B[2], noise[2]) if s <= br.s_switch] if may[2] else []
+        events = [(s, _MAXIMUM) for s in self._crossings(G[2], B[2], noise[2], values[2]) if s <= br.s_switch]
         if side != FREE:
-            br.delta = G[:, 0]
-            if may[1]:
-                events += [(s, _PEAK) for s in crossings(G[:, 1], -1, B[1], noise[1]) if s <= br.s_switch]
+            br.delta = G[0]
+            events += [(s, _PEAK) for s in self._crossings(G[1], B[1], noise[1], values[1]) if s <= br.s_switch]
             if self._piece is not None:
                 events += [(s, _VOLTAGE_PEAK) for s in self._piece.peaks(min(br.s_switch, 1.0))]
             events.sort()
         br.events = events
         return br
 
-    def _event_maps(self, side: int, v: float) -> tuple[np.ndarray, np.ndarray]:
-        """The event functionals of ``side`` for base velocity ``v``, and their absolute values."""
-        functionals = self._functionals[side]
-        if functionals[ONE, 2] != v or side not in self._magnitudes:
-            functionals[ONE, 2] = v  # p' = u' + v
-            self._magnitudes[side] = np.abs(functionals)
-        return functionals, self._magnitudes[side]
-
-    def _ledger_integrands(self, c: np.ndarray, tau: float, side: int, v: float) -> np.ndarray:
-        """Primitives, in normalised time, of the ledger's rates on a bracket (J).
-
-        Columns: dissipation in ``C`` (``C u'^2``), in ``C_eq`` (``C_eq delta'^2``), and the work
-        of the base (``-v (K u + C u')``: minus the force the device exerts on it, times ``v``).
-        """
-        p = self.params
-        P = np.zeros((PRIMITIVE_TERMS, 3))
-        primitive_of_square(c[:, DU], p.C * tau, out=P[:, 0])
-        if side != FREE:
-            primitive_of_square(c[:, DW] - c[:, DU], p.C_eq * tau, out=P[:, 1])
-        if v != 0.0:
-            primitive(p.K * c[:, U] + p.C * c[:, DU], -v * tau, out=P[:, 2])
-        return P
+    @staticmethod
+    def _crossings(g: np.ndarray, b: np.ndarray, noise: float, values: list[float]) -> list[float]:
+        """The falls through zero of an event function (maxima of ``p``, peaks of ``delta``)."""
+        if min(values) > 0.0 or max(values) < 0.0:
+            return []
+        return crossings(g, -1, b, noise, values)
 
     def _contact_piece(self, c: np.ndarray, tau: float, side: int) -> Piece:
         """The voltage of the barrier on ``side`` over a contact bracket (``circuit.py``)."""
@@ -573,11 +600,11 @@ class Simulator:
             return Piece(c[:, VOLT].copy(), 0.0, tau / self._RC, D, tau, R, chi)
         return driven(self._circuit_V[(side + 1) // 2], D, tau / self._RC, tau * chi / self.barrier.C_p, tau, R, chi)
 
-    def _approach_sign(self, x: np.ndarray, side: int) -> int:
+    def _approach_sign(self, x: list[float], side: int) -> int:
         """Sign of the relative acceleration of the impact mass towards the barrier on ``side``
         from the main spring and damper alone (the barrier's force left out), at state ``x``."""
-        main_acceleration = -(self.params.K * x[U] + self.params.C * x[DU])
-        return int(np.sign(-side * main_acceleration))
+        towards = side * (self.params.K * x[U] + self.params.C * x[DU])  # -side * main acceleration
+        return (towards > 0.0) - (towards < 0.0)
 
     def _non_terminal_event(self, br: "_Bracket", s: float, kind: int) -> None:
         if kind == _MAXIMUM:
@@ -598,7 +625,7 @@ class Simulator:
         br = self._bracket
         if br is None:
             return
-        dissipated_C, dissipated_Ceq, work_base = br.powers @ br.ledger
+        dissipated_C, dissipated_Ceq, work_base = self._booked_ledger(br)
         a = self._accounts
         a.dissipated_C += dissipated_C
         a.dissipated_Ceq += dissipated_Ceq
@@ -613,6 +640,37 @@ class Simulator:
             self._circuit_converted += piece.converted(br.s, br.powers)
             self._circuit_peak = max(self._circuit_peak, abs(v))
             self._piece = None
+
+    def _open_ledger(self, br: "_Bracket") -> tuple[float, float, float]:
+        """Dissipation in ``C`` and ``C_eq`` and work of the base (J) on the bracket so far, read
+        from the primitives of the rates (made on the first reading of the bracket: a host that
+        reads the ledger every step pays one product per reading)."""
+        if br.ledger is None:
+            u_rate, delta_rate, force = br.rates
+            weights = self._ledger_weights(br)
+            br.ledger = np.zeros((3, PRIMITIVE_TERMS))
+            primitive_of_square(u_rate, weights[0], out=br.ledger[0])
+            primitive_of_square(delta_rate, weights[1], out=br.ledger[1])
+            primitive(force, weights[2], out=br.ledger[2])
+        return tuple((br.ledger @ br.powers).tolist())
+
+    def _booked_ledger(self, br: "_Bracket") -> tuple[float, float, float]:
+        """The same as ``_open_ledger``, to rounding, as quadratic forms of the rates: what is
+        booked when the bracket closes, the same whether it was read before or not.
+
+        ``int_0^s a(r)^2 dr = s (a p)^T H (a p)`` with ``p_k = s^k`` and the Hilbert matrix
+        ``H_jk = 1 / (j + k + 1)``, whose first row also gives ``int_0^s a(r) dr = s H[0] (a p)``."""
+        scaled = br.rates * br.powers[:STATE_TERMS]
+        weighted = scaled @ _HILBERT
+        squares = np.add.reduce(scaled * weighted, axis=1).tolist()
+        weights = self._ledger_weights(br)
+        s = br.s
+        return weights[0] * s * squares[0], weights[1] * s * squares[1], weights[2] * s * float(weighted[2, 0])
+
+    def _ledger_weights(self, br: "_Bracket") -> tuple[float, float, float]:
+        """Factors of the ledger's rates: ``C``, ``C_eq`` and ``-v``, times the bracket length
+        (the rates are polynomials in normalised time)."""
+        return self.params.C * br.tau, self.params.C_eq * br.tau, -br.v * br.tau
 
     def _record_maximum(self, t: float, p: float) -> None:
         self._metrics = None
@@ -715,7 +773,7 @@ def _event_functionals(side: int, d: float, n: int = 5) -> np.ndarray:
 
     Free flight: ``r - d/2``, ``-r - d/2`` (onsets, right and left) and ``p'``; contact on
     ``side``: ``delta`` (separation), ``delta'`` (its peak) and ``p'``. The base velocity in
-    ``p' = u' + v`` is filled in per bracket.
+    ``p' = u' + v`` is added per bracket (``_open_bracket``).
     """
     L = np.zeros((n, 3))
     if side == FREE:
@@ -728,6 +786,25 @@ def _event_functionals(side: int, d: float, n: int = 5) -> np.ndarray:
         L[[DU, DW], 1] = [-side, side]
     L[DU, 2] = 1.0
     return L
+
+
+def _mirror_signs(n: int) -> np.ndarray:
+    """``S`` with ``A_left = S A_right S`` (``_contact_matrix``): the constant (and the voltage)
+    change sign, the displacements and velocities do not."""
+    signs = np.ones(n)
+    signs[ONE:] = -1.0
+    return signs
+
+
+def _ledger_rates(side: int, K: float, C: float, n: int = 5) -> np.ndarray:
+    """The ledger's rates as columns acting on the state: ``u'``, ``delta'`` (squared, so its sign
+    does not matter; zero in free flight) and ``K u + C u'`` (minus the force on the base)."""
+    R = np.zeros((n, 3))
+    R[DU, 0] = 1.0
+    if side != FREE:
+        R[[DU, DW], 1] = [-1.0, 1.0]
+    R[[U, DU], 2] = [K, C]
+    return R
 
 
 def _check_time_scales(params: Parameters, free: LinearPhase, contact: LinearPhase) -> None:
