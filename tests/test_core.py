@@ -70,6 +70,16 @@ def test_phase_flow_is_the_matrix_exponential():
         assert np.allclose(c.sum(axis=0), exact, rtol=1e-13, atol=1e-13 * np.abs(exact).max())
 
 
+@pytest.mark.parametrize("M, K, C", [(2.0, 2e3, 3.0), (1.0, 1.0, 10.0), (1.0, 4.0, 4.0), (2.0, 0.0, 1.0),
+                                     (1.0, 1e6, 0.0), (1.0, 1e3, 1e5)])
+def test_free_flight_spectral_radius_in_closed_form_equals_the_eigenvalues(M, K, C):
+    # Under-, critically and overdamped, and a free mass: the bracket length of free flight.
+    from piezo_fmu.simulator import _free_matrix, _free_spectral_radius
+
+    eigen = np.max(np.abs(np.linalg.eigvals(_free_matrix(M, K, C))))
+    assert _free_spectral_radius(M, K, C) == pytest.approx(eigen, rel=1e-12)
+
+
 @pytest.mark.parametrize("model", [0, 2])
 def test_left_barrier_is_the_right_one_mirrored_exactly(model):
     # The left barrier's phase and bracket maps are made from the right one's by sign changes:

@@ -64,6 +64,13 @@ def integral_phi_squared(a: float, b: float, L: float) -> float:
     return float(0.5 * (b - a) * np.dot(weights, mode_shape(x, L) ** 2))
 
 
+@lru_cache(maxsize=8)
+def _eta1(L: float) -> float:
+    """``eta_1 = int_0^L phi_1^2 dx`` (eq. 19), m: a function of ``L`` alone, so sweeps over the
+    patch and the masses compute it once."""
+    return integral_phi_squared(0.0, L, L)
+
+
 @dataclass(frozen=True)
 class Barrier:
     """Equivalent tip quantities of one barrier, SI.
@@ -117,7 +124,7 @@ def derive_barrier(params: Parameters) -> Barrier:
     """
     L = params.L
     beta1 = first_mode_root() / L
-    eta1 = integral_phi_squared(0.0, L, L)
+    eta1 = _eta1(L)
     x2 = params.x1 + params.L_p
     phi2_patch = integral_phi_squared(params.x1, x2, L)
 

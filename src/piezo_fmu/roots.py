@@ -96,14 +96,15 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
     # requested kind, or exactly one, which needs no subdivision.
     if values is None:
         values = b.tolist()
-    inner_lo, inner_hi, start = min(values[1:]), max(values[1:]), values[0]
-    if inner_lo > 0.0 and start >= 0.0 or inner_hi < 0.0 and start <= 0.0:
-        return []  # one strict sign after the start, which is zero or of that sign too
-    variations, first, last, f_lo, f_hi = _pattern(values, noise)
+    if min(values) > 0.0 or max(values) < 0.0:
+        return []  # one strict sign (most event functions on most brackets)
+    if values[0] == 0.0 and (min(values[1:]) > 0.0 or max(values[1:]) < 0.0):
+        return []  # zero at the start, then one strict sign
+    variations, first, last, f_lo, f_hi, guess = _pattern(values, noise)
     if variations < 2:
         found = []
         if variations and first == -direction and last == direction:
-            found.append(_refine(a.tolist(), 0.0, 1.0, direction, f_lo, f_hi))
+            found.append(_refine(a.tolist(), 0.0, 1.0, direction, f_lo, f_hi, guess))
         if f_hi == 0.0 and last == -direction:
             found.append(1.0)  # a root exactly at the right end
         return found
@@ -135,11 +136,14 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
     return found
 
 
-def _pattern(b: list[float], noise: float) -> tuple[int, int, int, float, float]:
+def _pattern(b: list[float], noise: float) -> tuple[int, int, int, float, float, float]:
     """:func:`_sign_pattern` of Bernstein coefficients given as floats, those within ``noise`` of
-    zero counted as zero; and the first and last coefficients so counted."""
+    zero counted as zero; the first and last coefficients so counted; and where the control
+    polygon first crosses zero (normalised time; 0.5 without a crossing), a start for Newton."""
     variations = first = last = 0
-    for value in b:
+    guess = 0.5
+    before = 0
+    for index, value in enumerate(b):
         if value > noise:
             sign = 1
         elif value < -noise:
@@ -149,13 +153,17 @@ def _pattern(b: list[float], noise: float) -> tuple[int, int, int, float, float]
         if not first:
             first = sign
         elif sign != last:
+            if not variations:
+                guess = (before + (index - before) * b[before] / (b[before] - value)) / (len(b) - 1)
             variations += 1
-        last = sign
+        last, before = sign, index
     f_lo, f_hi = b[0], b[-1]
-    return variations, first, last, (f_lo if abs(f_lo) > noise else 0.0), (f_hi if abs(f_hi) > noise else 0.0)
+    return (variations, first, last, (f_lo if abs(f_lo) > noise else 0.0), (f_hi if abs(f_hi) > noise else 0.0),
+            guess)
 
 
-def _refine(a: list[float], lo: float, hi: float, direction: int, f_lo: float, f_hi: float) -> float:
+def _refine(a: list[float], lo: float, hi: float, direction: int, f_lo: float, f_hi: float,
+            start: float | None = None) -> float:
     """The root in ``(lo, hi)`` of a polynomial that crosses zero once there, in ``direction``.
 
     Newton's method on the polynomial, kept inside a shrinking bracket whose ends have the
@@ -164,9 +172,13 @@ def _refine(a: list[float], lo: float, hi: float, direction: int, f_lo: float, f
     ``NEWTON_LAST`` the convergence is quadratic, so the error after it is of the order of its
     square (below 1e-17 on a bracket whose polynomial turns by at most a few radians) and it is
     the last. ``f_lo`` and ``f_hi`` are the values at the ends (the end Bernstein coefficients),
-    which give the secant start.
+    which give the secant start, unless a ``start`` inside ``(lo, hi)`` is given (the crossing of
+    the control polygon: nearer, so one or two evaluations fewer).
     """
-    x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo * f_hi < 0.0 else 0.5 * (lo + hi)
+    if start is not None and lo < start < hi:
+        x = start
+    else:
+        x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo * f_hi < 0.0 else 0.5 * (lo + hi)
     for _ in range(300):
         value, slope = _horner_with_slope(a, x)
         if value == 0.0:
@@ -185,6 +197,14 @@ def _refine(a: list[float], lo: float, hi: float, direction: int, f_lo: float, f
             return new
         x = new
     return x
+
+
+def horner(a: list[float], s: float) -> float:
+    """Value at ``s`` of the polynomial with power coefficients ``a``."""
+    value = 0.0
+    for coefficient in reversed(a):
+        value = value * s + coefficient
+    return value
 
 
 def _horner_with_slope(a: list[float], s: float) -> tuple[float, float]:

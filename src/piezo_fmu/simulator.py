@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import operator
 from collections import deque
+from functools import lru_cache
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
@@ -28,9 +29,9 @@ from .barrier import derive_barrier
 from .circuit import Piece, decay, driven
 from .metrics import MetricAccumulators, Metrics
 from .parameters import COUPLED, Parameters
-from .propagation import (MIN_BRACKET, POWERS_AT_START, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, evaluate, powers,
+from .propagation import (MIN_BRACKET, POWERS_AT_END, POWERS_AT_START, PRIMITIVE_TERMS, STATE_TERMS, LinearPhase, powers,
                           primitive, primitive_of_square)
-from .roots import _TO_BERNSTEIN, crossings
+from .roots import _TO_BERNSTEIN, crossings, horner
 
 FREE = 0
 RIGHT = +1
@@ -41,6 +42,9 @@ MAX_SWITCHES_AT_ONE_INSTANT = 8
 _ZERO = 1e-13
 #: Rounding level of an event function, in ulp of the largest state term it is made of.
 _NOISE_ULPS = 64
+#: Largest size of the terms of a bracket (state, event functions, the ledger's rates): their
+#: squares, in the ledger, stay inside double range.
+_STATE_LIMIT = 1e150
 EPS = float(np.finfo(float).eps)
 
 # Columns of the deviation state x = (u, w, u', w', 1), with u = p - y(t), w = q - y(t); in
@@ -154,11 +158,11 @@ class EnergyLedger(NamedTuple):
 
 
 _MAXIMUM, _PEAK, _VOLTAGE_PEAK = 0, 1, 2
-#: ``1 / (j + k + 1)``: the integrals over [0, 1] of products of powers (``Simulator._booked_ledger``).
+#: ``1 / (j + k + 1)``: the integrals over [0, 1] of products of powers (``_ledger_integrals``).
 _HILBERT = 1.0 / (np.arange(STATE_TERMS)[:, None] + np.arange(STATE_TERMS)[None, :] + 1.0)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Bracket:
     """One bracket of the present phase: its exact trajectory and its located events.
 
@@ -203,9 +207,38 @@ class _Bracket:
         return cls(**data)
 
 
+#: Closed brackets whose ledger is booked in one set of products (``Simulator._book_pending``).
+_LEDGER_BATCH = 64
+
+
+class _PendingLedger:
+    """The rates and positions of closed brackets not booked yet (at most ``_LEDGER_BATCH``), in
+    arrays made once: the memory of a run does not grow with it."""
+
+    def __init__(self):
+        self.rates = np.empty((_LEDGER_BATCH, 3, STATE_TERMS))
+        self.powers = np.empty((_LEDGER_BATCH, STATE_TERMS))
+        self.factors = np.empty((_LEDGER_BATCH, 3))
+        self.count = 0
+
+
+def _ledger_integrals(rates: np.ndarray, powers: np.ndarray) -> np.ndarray:
+    """For brackets stopped at ``s`` (``powers`` = ``s^k``), shape (brackets, 3): the integrals
+    over ``[0, s]`` of the squares of the first two rates and of the third, divided by ``s``.
+
+    ``int_0^s a(r)^2 dr = s (a p)^T H (a p)`` with ``p_k = s^k`` and the Hilbert matrix
+    ``H_jk = 1 / (j + k + 1)``, whose first row also gives ``int_0^s a(r) dr = s H[0] (a p)``:
+    the same integrals as the primitives of ``Simulator._open_ledger``, to rounding."""
+    scaled = rates * powers[:, None, :]
+    weighted = scaled @ _HILBERT
+    integrals = np.add.reduce(scaled * weighted, axis=2)
+    integrals[:, 2] = weighted[:, 2, 0]
+    return integrals
+
+
 class _BracketMaps:
-    """The linear maps a bracket of one phase needs from its start state ``x``, stacked so that
-    one product ``stacked @ x`` gives them all:
+    """The linear maps a bracket of one phase needs from its start state ``x``, stacked as
+    columns so that one product ``x @ stacked`` gives them all:
 
     - the Taylor coefficients of the state (ORDER+1 rows of n);
     - the power and the Bernstein coefficients of the three event functions (``functionals``,
@@ -220,22 +253,27 @@ class _BracketMaps:
         n = terms.shape[1]
         power = (np.concatenate([functionals, rates], axis=1).T @ terms).transpose(1, 0, 2)  # (row, k, j)
         bernstein_rows = _TO_BERNSTEIN.T @ power[:3]
-        self.stacked = np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)])
+        self.stacked = np.ascontiguousarray(
+            np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)]).T)
         events = 3 * STATE_TERMS
         self.split = (STATE_TERMS * n, STATE_TERMS * n + events, STATE_TERMS * n + 2 * events)
         #: Rows (one per event function) of ``sum_i |functional_i| max_k |terms_k[i, j]|``: with the
         #: sizes ``|x_j|`` of the start state, a bound on the state terms an event function is made of.
         self.noise_rows = (np.abs(functionals).T @ np.abs(terms).max(axis=0)).tolist()
+        #: Sums of those rows: times the sum of the ``|x_j|``, a bound on the rounding level.
+        self.noise_bounds = [sum(row) for row in self.noise_rows]
+        #: The largest column sum of ``|stacked|``: times the sum of the ``|x_j|``, a bound on the
+        #: size of everything a bracket is made of.
+        self.size_bound = float(np.abs(self.stacked).sum(axis=0).max())
 
     def mirrored(self, phase: LinearPhase, signs: np.ndarray) -> "_BracketMaps":
         """The maps of the other barrier: its phase is this one's mirrored by ``signs``
         (``LinearPhase.mirrored``), and its event functions ``delta`` and ``delta'`` are this one's
         in the mirrored state, negated (``_event_functionals``); the rates are the same."""
         mirror = object.__new__(_BracketMaps)
-        mirror.phase, mirror.split, mirror.noise_rows = phase, self.split, self.noise_rows
-        events = np.repeat([-1.0, -1.0, 1.0], STATE_TERMS)
-        rows = np.concatenate([np.tile(signs, STATE_TERMS), events, np.ones(3 * STATE_TERMS), events])
-        mirror.stacked = self.stacked * rows[:, None] * signs
+        mirror.phase, mirror.split, mirror.noise_rows, mirror.noise_bounds = phase, self.split, self.noise_rows, self.noise_bounds
+        mirror.size_bound = self.size_bound
+        mirror.stacked = self.stacked * signs[:, None] * _mirror_rows(len(signs))
         return mirror
 
 
@@ -273,7 +311,7 @@ class Simulator:
         M_eq, K_eq, C_eq = self.barrier.M_eq, self.barrier.K_eq, params.C_eq
         self._M_contact = M - M_eq
         self._m_contact = m + M_eq
-        self._free = LinearPhase(_free_matrix(M, K, C))
+        self._free = LinearPhase(_free_matrix(M, K, C), _free_spectral_radius(M, K, C))
         #: The voltage model: 0 quasi-static (no circuit state), 1 circuit one-way, 2 coupled.
         self._vm = params.voltage_model
         #: The voltage of the barrier in contact on the open bracket (voltage_model 1 and 2).
@@ -309,6 +347,7 @@ class Simulator:
         self._y, self._v = float(y0), float(v0)
         self._bracket: _Bracket | None = None
         self._accounts = _Accounts()
+        self._pending = _PendingLedger()
         try:
             self._accounts.initial = self.energy.total
         except OverflowError:  # float ** overflows with an exception, * with inf
@@ -407,6 +446,7 @@ class Simulator:
             kinetic = 0.5 * (self._M_contact * self._dp**2 + self._m_contact * self._dq**2)
             delta = self._side * (self._q - self._p) - p.d / 2
             potential_Keq = 0.5 * self.barrier.K_eq * delta**2
+        self._book_pending()
         a = self._accounts
         br = self._bracket
         open_C, open_Ceq, open_base = self._open_ledger(br) if br else (0.0, 0.0, 0.0)
@@ -501,8 +541,8 @@ class Simulator:
 
     def _move_to(self, br: "_Bracket", s: float, t: float) -> None:
         """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
-        br.powers = powers(s)
-        u, w, du, dw = (br.powers[:STATE_TERMS] @ br.c).tolist()[:4]
+        br.powers = POWERS_AT_END if s == 1.0 else powers(s)
+        u, w, du, dw = np.dot(br.powers[:STATE_TERMS], br.c).tolist()[:4]
         base = br.base + br.v * s * br.tau
         self.t = t
         self._p, self._q = u + base, w + base
@@ -518,15 +558,16 @@ class Simulator:
         xs = [self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0]
         if side != FREE and self._vm == COUPLED:
             xs.append(self._circuit_V[(side + 1) // 2])
-        x = np.array(xs)
-        # One product gives the Taylor coefficients of the state, and the power and Bernstein
-        # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
-        z = maps.stacked @ x
-        if not math.isfinite(z @ z):
+        sizes = [abs(value) for value in xs]
+        total = sum(sizes)  # NaN and inf propagate through it
+        if not total * maps.size_bound < _STATE_LIMIT:
             # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
             raise ValueError(f"y = {y!r} m, v = {v!r} m/s at t = {self.t!r} s: the state (p = {self._p!r} m, "
                              f"q = {self._q!r} m, p' = {self._dp!r} m/s, q' = {self._dq!r} m/s) overflows double "
                              "precision on the next bracket; allowed range: base and state well below 1e150")
+        # One product gives the Taylor coefficients of the state, and the power and Bernstein
+        # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
+        z = np.array(xs) @ maps.stacked
         split = maps.split
         c, G, rates, B = (z[:split[0]].reshape(STATE_TERMS, -1), z[split[0]:split[1]].reshape(3, -1),
                           z[split[1]:split[2]].reshape(3, -1), z[split[2]:].reshape(3, -1))
@@ -537,10 +578,8 @@ class Simulator:
             self._piece = self._contact_piece(c, phase.h, side)
         br = _Bracket(c=c, t_start=self.t, tau=phase.h, base=y, v=v, rates=rates)
         # The rounding level of each event function: a few ulp of the largest state terms that
-        # make it up, bounded from the start state.
-        sizes = [abs(value) for value in xs]
-        noise = [_NOISE_ULPS * EPS * sum(map(operator.mul, row, sizes)) for row in maps.noise_rows]
-        noise[2] += _NOISE_ULPS * EPS * abs(v)
+        # make it up, bounded from the start state (made only for the functions that need it).
+        noise_rows = maps.noise_rows
         n_terminal = 2 if side == FREE else 1
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
@@ -548,7 +587,11 @@ class Simulator:
         for j in range(n_terminal):
             g, b, row = G[j], B[j], values[j]
             start_value = row[0]  # the first Bernstein coefficient is the value at the start
-            if abs(start_value) <= max(self._zero, noise[j]):
+            near_zero = abs(start_value) <= max(self._zero, _NOISE_ULPS * EPS * maps.noise_bounds[j] * total)
+            if not near_zero and (min(row) > 0.0 or max(row) < 0.0):
+                continue  # one strict sign, away from zero at the start: no root
+            noise = _NOISE_ULPS * EPS * sum(map(operator.mul, noise_rows[j], sizes))
+            if near_zero and abs(start_value) <= max(self._zero, noise):
                 # At a switch the function that fired is zero to rounding: its sign just after
                 # the start is that of the relative velocity towards the barrier. When that is
                 # zero to rounding too (a body coming to rest on a barrier), the relative
@@ -565,20 +608,23 @@ class Simulator:
                     br.s_switch, br.switch_to = 0.0, targets[j]
                     return br
                 # The start value set to zero: every Bernstein coefficient holds it with weight 1.
+                # Most often the rest then has one strict sign (rounding is monotonic, so the
+                # extremes of the shifted coefficients are the shifted extremes): no root.
+                rest = row[1:]
+                if min(rest) - start_value > 0.0 or max(rest) - start_value < 0.0:
+                    continue
                 g = g.copy()
                 g[0] = 0.0
                 b = b - start_value
                 row = [value - start_value for value in row]
-            elif min(row) > 0.0 or max(row) < 0.0:
-                continue  # one strict sign: no root (most event functions on most brackets)
-            roots = crossings(g, direction, b, noise[j], row)
+            roots = crossings(g, direction, b, noise, row)
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], targets[j]
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
-        events = [(s, _MAXIMUM) for s in self._crossings(G[2], B[2], noise[2], values[2]) if s <= br.s_switch]
+        events = [(s, _MAXIMUM) for s in self._falls(G, B, values, 2, sizes, noise_rows, v) if s <= br.s_switch]
         if side != FREE:
             br.delta = G[0]
-            events += [(s, _PEAK) for s in self._crossings(G[1], B[1], noise[1], values[1]) if s <= br.s_switch]
+            events += [(s, _PEAK) for s in self._falls(G, B, values, 1, sizes, noise_rows, v) if s <= br.s_switch]
             if self._piece is not None:
                 events += [(s, _VOLTAGE_PEAK) for s in self._piece.peaks(min(br.s_switch, 1.0))]
             events.sort()
@@ -586,11 +632,15 @@ class Simulator:
         return br
 
     @staticmethod
-    def _crossings(g: np.ndarray, b: np.ndarray, noise: float, values: list[float]) -> list[float]:
-        """The falls through zero of an event function (maxima of ``p``, peaks of ``delta``)."""
-        if min(values) > 0.0 or max(values) < 0.0:
+    def _falls(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
+               v: float) -> list[float]:
+        """Where event function ``j`` falls through zero: maxima of ``p`` (j = 2, where the base
+        velocity adds to the rounding level) and peaks of ``delta`` (j = 1, in contact)."""
+        row = values[j]
+        if min(row) > 0.0 or max(row) < 0.0:
             return []
-        return crossings(g, -1, b, noise, values)
+        noise = _NOISE_ULPS * EPS * (sum(map(operator.mul, noise_rows[j], sizes)) + (abs(v) if j == 2 else 0.0))
+        return crossings(G[j], -1, B[j], noise, row)
 
     def _contact_piece(self, c: np.ndarray, tau: float, side: int) -> Piece:
         """The voltage of the barrier on ``side`` over a contact bracket (``circuit.py``)."""
@@ -608,10 +658,10 @@ class Simulator:
 
     def _non_terminal_event(self, br: "_Bracket", s: float, kind: int) -> None:
         if kind == _MAXIMUM:
-            p = float(evaluate(br.c[:, U], s)) + br.base + br.v * s * br.tau
+            p = horner(br.c[:, U].tolist(), s) + br.base + br.v * s * br.tau
             self._record_maximum(br.t_start + s * br.tau, p)
         elif kind == _PEAK:
-            self._open.max_deflection = max(self._open.max_deflection, float(evaluate(br.delta, s)))
+            self._open.max_deflection = max(self._open.max_deflection, horner(br.delta.tolist(), s))
         else:
             self._circuit_peak = max(self._circuit_peak, abs(self._piece.value(s, powers(s))))
 
@@ -625,11 +675,14 @@ class Simulator:
         br = self._bracket
         if br is None:
             return
-        dissipated_C, dissipated_Ceq, work_base = self._booked_ledger(br)
-        a = self._accounts
-        a.dissipated_C += dissipated_C
-        a.dissipated_Ceq += dissipated_Ceq
-        a.work_base += work_base
+        pending = self._pending
+        i = pending.count
+        pending.rates[i] = br.rates
+        pending.powers[i] = br.powers[:STATE_TERMS]
+        pending.factors[i] = self._ledger_weights(br, br.s)
+        pending.count = i + 1
+        if i + 1 == _LEDGER_BATCH:
+            self._book_pending()
         self._bracket = None
         if self._vm and self._piece is not None:
             # Book the voltage of the barrier in contact where the state stands.
@@ -647,7 +700,7 @@ class Simulator:
         reads the ledger every step pays one product per reading)."""
         if br.ledger is None:
             u_rate, delta_rate, force = br.rates
-            weights = self._ledger_weights(br)
+            weights = self._ledger_weights(br, 1.0)
             br.ledger = np.zeros((3, PRIMITIVE_TERMS))
             primitive_of_square(u_rate, weights[0], out=br.ledger[0])
             primitive_of_square(delta_rate, weights[1], out=br.ledger[1])
@@ -655,22 +708,31 @@ class Simulator:
         return tuple((br.ledger @ br.powers).tolist())
 
     def _booked_ledger(self, br: "_Bracket") -> tuple[float, float, float]:
-        """The same as ``_open_ledger``, to rounding, as quadratic forms of the rates: what is
-        booked when the bracket closes, the same whether it was read before or not.
+        """What closing the bracket now would book (``_book_pending``)."""
+        squares = _ledger_integrals(br.rates[None], br.powers[None, :STATE_TERMS])[0].tolist()
+        weights = self._ledger_weights(br, br.s)
+        return weights[0] * squares[0], weights[1] * squares[1], weights[2] * squares[2]
 
-        ``int_0^s a(r)^2 dr = s (a p)^T H (a p)`` with ``p_k = s^k`` and the Hilbert matrix
-        ``H_jk = 1 / (j + k + 1)``, whose first row also gives ``int_0^s a(r) dr = s H[0] (a p)``."""
-        scaled = br.rates * br.powers[:STATE_TERMS]
-        weighted = scaled @ _HILBERT
-        squares = np.add.reduce(scaled * weighted, axis=1).tolist()
-        weights = self._ledger_weights(br)
-        s = br.s
-        return weights[0] * s * squares[0], weights[1] * s * squares[1], weights[2] * s * float(weighted[2, 0])
+    def _book_pending(self) -> None:
+        """Book the ledger of the closed brackets not booked yet, in one set of products: the
+        same whether a host read the ledger in between or not, to rounding."""
+        pending = self._pending
+        n = pending.count
+        if not n:
+            return
+        integrals = _ledger_integrals(pending.rates[:n], pending.powers[:n])
+        booked = (integrals * pending.factors[:n]).T.tolist()
+        a = self._accounts
+        a.dissipated_C += math.fsum(booked[0])
+        a.dissipated_Ceq += math.fsum(booked[1])
+        a.work_base += math.fsum(booked[2])
+        pending.count = 0
 
-    def _ledger_weights(self, br: "_Bracket") -> tuple[float, float, float]:
+    def _ledger_weights(self, br: "_Bracket", s: float) -> tuple[float, float, float]:
         """Factors of the ledger's rates: ``C``, ``C_eq`` and ``-v``, times the bracket length
-        (the rates are polynomials in normalised time)."""
-        return self.params.C * br.tau, self.params.C_eq * br.tau, -br.v * br.tau
+        (the rates are polynomials in normalised time) and ``s`` (``_ledger_integrals``)."""
+        tau = br.tau * s
+        return self.params.C * tau, self.params.C_eq * tau, -br.v * tau
 
     def _record_maximum(self, t: float, p: float) -> None:
         self._metrics = None
@@ -723,6 +785,7 @@ class Simulator:
     # ------------------------------------------------------------------ saving state
     def snapshot(self) -> dict:
         """The full internal state as a JSON-safe dict (floats, ints, lists)."""
+        self._book_pending()
         data = {
             "t": self.t, "p": self._p, "dp": self._dp, "q": self._q, "dq": self._dq,
             "side": self._side, "y": self._y, "v": self._v,
@@ -788,6 +851,16 @@ def _event_functionals(side: int, d: float, n: int = 5) -> np.ndarray:
     return L
 
 
+@lru_cache(maxsize=None)
+def _mirror_rows(n: int) -> np.ndarray:
+    """The column signs of ``_BracketMaps.stacked`` between the barriers, for states of size ``n``:
+    the state's terms like the state, ``delta`` and ``delta'`` negated, ``p'`` and the rates kept."""
+    events = np.repeat([-1.0, -1.0, 1.0], STATE_TERMS)
+    rows = np.concatenate([np.tile(_mirror_signs(n), STATE_TERMS), events, np.ones(3 * STATE_TERMS), events])
+    rows.flags.writeable = False
+    return rows
+
+
 def _mirror_signs(n: int) -> np.ndarray:
     """``S`` with ``A_left = S A_right S`` (``_contact_matrix``): the constant (and the voltage)
     change sign, the displacements and velocities do not."""
@@ -832,6 +905,15 @@ def _free_matrix(M: float, K: float, C: float) -> np.ndarray:
     A[DU, U] = -K / M
     A[DU, DU] = -C / M
     return A
+
+
+def _free_spectral_radius(M: float, K: float, C: float) -> float:
+    """1/s: the largest ``|lambda|`` of ``M lambda^2 + C lambda + K = 0`` (the other eigenvalues
+    of free flight are zero): ``sqrt(K / M)`` when underdamped, the faster decay rate otherwise."""
+    a, b = C / (2.0 * M), K / M
+    if a * a <= b:
+        return math.sqrt(b)
+    return a + math.sqrt(a * a - b)
 
 
 def _contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: float, d: float, side: int,
