@@ -32,10 +32,10 @@ DEFAULT_STOP_TIME = 2.0
 #: Default communication step of a sweep (s). Sweeps keep only end-of-run metrics, which the
 #: FMU computes exactly whatever the step (its events are located exactly, and a run chopped
 #: into any steps gives the same impacts), so the step only costs time: each step adds about
-#: 15 microseconds of FMI and core overhead to a point. 0.02 s (100 steps per 2 s run, a 50 Hz
-#: co-simulation) keeps a point within about 1.25x the core's own cost (0.1 s: 1.15x, 0.01 s:
-#: 1.35x, 1e-3 s: 3x in CPU time); ``--step`` changes it.
-DEFAULT_SWEEP_STEP = 0.02
+#: 9 microseconds of FMI and core overhead to a point, whose core now costs about 3.6 ms. 0.2 s
+#: (10 steps per 2 s run) keeps a point within about 1.15x the core's own cost in CPU time
+#: (0.1 s: 1.2x, 0.02 s: 1.35x, 0.01 s: 1.6x, 1e-3 s: 4.4x); ``--step`` changes it.
+DEFAULT_SWEEP_STEP = 0.2
 
 
 class UsageError(Exception):
