@@ -218,7 +218,8 @@ class _PendingLedger:
     def __init__(self):
         self.rates = np.empty((_LEDGER_BATCH, 3, STATE_TERMS))
         self.powers = np.empty((_LEDGER_BATCH, STATE_TERMS))
-        self.factors = np.empty((_LEDGER_BATCH, 3))
+        self.span = np.empty(_LEDGER_BATCH)
+        self.v = np.empty(_LEDGER_BATCH)
         self.count = 0
 
 
@@ -679,7 +680,8 @@ class Simulator:
         i = pending.count
         pending.rates[i] = br.rates
         pending.powers[i] = br.powers[:STATE_TERMS]
-        pending.factors[i] = self._ledger_weights(br, br.s)
+        pending.span[i] = br.tau * br.s  # s, normalised, times the bracket's length
+        pending.v[i] = br.v
         pending.count = i + 1
         if i + 1 == _LEDGER_BATCH:
             self._book_pending()
@@ -721,7 +723,10 @@ class Simulator:
         if not n:
             return
         integrals = _ledger_integrals(pending.rates[:n], pending.powers[:n])
-        booked = (integrals * pending.factors[:n]).T.tolist()
+        # The factors of _ledger_weights: C, C_eq and -v, times the span of each bracket.
+        span = pending.span[:n]
+        booked = [(integrals[:, 0] * span * self.params.C).tolist(), (integrals[:, 1] * span * self.params.C_eq).tolist(),
+                  (integrals[:, 2] * span * -pending.v[:n]).tolist()]
         a = self._accounts
         a.dissipated_C += math.fsum(booked[0])
         a.dissipated_Ceq += math.fsum(booked[1])
