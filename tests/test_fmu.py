@@ -402,6 +402,26 @@ def run_outputs(host: Host, t_from: float, t_to: float, h: float) -> list[dict]:
     return out
 
 
+@pytest.mark.parametrize("call, message", [
+    (lambda fmu, out: fmu.setReal([out], [1.0]), "main_displacement (valueReference={out}, causality output) cannot be set"),
+    (lambda fmu, out: fmu.getInteger([out]), "valueReference={out} is not of type Integer"),
+    (lambda fmu, out: fmu.getReal([9999]), "no variable has valueReference=9999"),
+    (lambda fmu, out: fmu.getBoolean([out]), "valueReference={out} is not of type Boolean"),
+], ids=["set an output", "an Integer read of a Real", "an unknown reference", "a Boolean read"])
+def test_a_wrong_access_gets_a_non_ok_status_and_a_message_naming_it(unzipdir, model_description, call, message):
+    # The slave's own accessors (pythonfmu's variable objects are made for the model description
+    # only): what pythonfmu's accessors refuse, they refuse, and the process goes on.
+    host = Host(unzipdir, model_description)
+    out = host.variables["main_displacement"].valueReference
+    with pytest.raises(FMICallException):
+        call(host.fmu, out)
+    assert any(message.format(out=out) in text for status, text in host.messages if status >= fmi2Error), host.messages
+    again = Host(unzipdir, model_description)  # a new instance in the same process works
+    again.step(1e-3)
+    assert math.isfinite(again.outputs()["main_displacement"])
+    again.close()
+
+
 def test_get_and_set_state_reruns_bit_identically(unzipdir, model_description):
     host = Host(unzipdir, model_description)
     run_outputs(host, 0.0, 0.3, 1e-3)
