@@ -197,6 +197,8 @@ class CoreView:
 _READERS = tuple(spec.read for spec in OUTPUTS)
 #: The FMI type of each variable, by value reference.
 _KINDS = tuple("Integer" if spec.type == "Integer" else "Real" for spec in VARIABLES)
+#: The value references of each FMI type.
+_REFERENCES = {kind: frozenset(vr for vr, k in enumerate(_KINDS) if k == kind) for kind in ("Real", "Integer")}
 #: Brackets one communication step may need at the least (a few minutes of CPU): a longer step is
 #: refused at once rather than left to run for hours in the host.
 MAX_BRACKETS_PER_STEP = 1e7
@@ -265,13 +267,15 @@ class PiezoImpactDamper(Fmi2Slave):
                 self.register_variable(scalar_variable(spec, getter, setter), nested=False)
         return super().to_xml(model_options)
 
-    def _checked(self, vrs, kind: str):
+    @staticmethod
+    def _checked(vrs, kind: str):
         """``vrs``, each checked to be a variable of ``kind`` (as pythonfmu's own accessors do)."""
-        for vr in vrs:
-            if not 0 <= vr < len(_KINDS):
-                raise KeyError(f"no variable has valueReference={vr}")
-            if _KINDS[vr] != kind:
-                raise TypeError(f"Variable with valueReference={vr} is not of type {kind}!")
+        if not _REFERENCES.get(kind, frozenset()).issuperset(vrs):
+            for vr in vrs:
+                if not 0 <= vr < len(_KINDS):
+                    raise KeyError(f"no variable has valueReference={vr}")
+                if _KINDS[vr] != kind:
+                    raise TypeError(f"Variable with valueReference={vr} is not of type {kind}!")
         return vrs
 
     def get_real(self, vrs: List[int]) -> List[float]:
