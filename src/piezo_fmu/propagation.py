@@ -115,11 +115,6 @@ def powers(s: float) -> np.ndarray:
     return s ** _LONG
 
 
-def evaluate(c: np.ndarray, s: float) -> np.ndarray:
-    """Value at normalised time ``s`` of a polynomial (or a stack of them, along axis 0)."""
-    return (s ** _K) @ c
-
-
 def primitive(a: np.ndarray, weight: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
     """Coefficients (``PRIMITIVE_TERMS`` of them) of ``weight * int_0^s a``; written into ``out``
     (zero at index 0) when given."""
