@@ -256,8 +256,8 @@ class _BracketMaps:
         bernstein_rows = _TO_BERNSTEIN.T @ power[:3]
         self.stacked = np.ascontiguousarray(
             np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)]).T)
-        events = 3 * STATE_TERMS
-        self.split = (STATE_TERMS * n, STATE_TERMS * n + events, STATE_TERMS * n + 2 * events)
+        #: Where the state's coefficients end and the rows of the functions begin.
+        self.split = STATE_TERMS * n
         #: Rows (one per event function) of ``sum_i |functional_i| max_k |terms_k[i, j]|``: with the
         #: sizes ``|x_j|`` of the start state, a bound on the state terms an event function is made of.
         self.noise_rows = (np.abs(functionals).T @ np.abs(terms).max(axis=0)).tolist()
@@ -559,7 +559,7 @@ class Simulator:
         xs = [self._p - y, self._q - y, self._dp - v, self._dq - v, 1.0]
         if side != FREE and self._vm == COUPLED:
             xs.append(self._circuit_V[(side + 1) // 2])
-        sizes = [abs(value) for value in xs]
+        sizes = list(map(abs, xs))
         total = sum(sizes)  # NaN and inf propagate through it
         if not total * maps.size_bound < _STATE_LIMIT:
             # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
@@ -569,9 +569,8 @@ class Simulator:
         # One product gives the Taylor coefficients of the state, and the power and Bernstein
         # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
         z = np.array(xs) @ maps.stacked
-        split = maps.split
-        c, G, rates, B = (z[:split[0]].reshape(STATE_TERMS, -1), z[split[0]:split[1]].reshape(3, -1),
-                          z[split[1]:split[2]].reshape(3, -1), z[split[2]:].reshape(3, -1))
+        functions = z[maps.split:].reshape(9, STATE_TERMS)  # event functions, rates, Bernstein rows
+        c, G, rates, B = z[:maps.split].reshape(STATE_TERMS, -1), functions[:3], functions[3:6], functions[6:]
         if v != 0.0:
             G[2, 0] += v
             B[2] += v
