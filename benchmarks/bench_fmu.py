@@ -70,7 +70,7 @@ def main() -> None:
             raise SystemExit("the floor FMU does not have the piezo FMU's variables")
 
         times = {key: [] for key in fmus}
-        for key in fmus:  # warm-up: first imports of numpy, scipy and the core
+        for key in fmus:  # warm-up: first imports of numpy and the core
             time_run(unzipped[key], described[key])
         for _ in range(args.repeat):
             for key in fmus:  # interleaved, so that drift of the machine hits both alike

@@ -8,11 +8,11 @@
 # it expects to be loaded into a process that already has libpython's symbols. A Python host
 # (fmpy, libcosimpy, ecospy) has them; a plain C or C++ host does not, and dlopen of the FMU
 # fails with "undefined symbol: _Py_NoneStruct". The recipe, for the Python interpreter $PYTHON
-# (default: python3 on PATH) whose packages the FMU is to use (numpy and scipy):
+# (default: python3 on PATH) whose packages the FMU is to use (numpy):
 #
 #   LD_PRELOAD=<libpython of $PYTHON>     the shared libpython, e.g. .../lib/libpython3.11.so.1.0
 #   PYTHONHOME=<sys.base_prefix>          where the embedded interpreter finds its standard library
-#   PYTHONPATH=<site-packages of $PYTHON> where it finds numpy and scipy (a venv's own packages)
+#   PYTHONPATH=<site-packages of $PYTHON> where it finds numpy (a venv's own packages)
 #
 # The Python must be built with --enable-shared (Debian's python3 is; so are pyenv builds made
 # with PYTHON_CONFIGURE_OPTS=--enable-shared, as on this project's machines). The launcher exits

@@ -120,6 +120,27 @@ def test_booked_ledger_equals_the_ledger_read_on_the_open_bracket():
     assert checked == {0, 1, -1}
 
 
+@pytest.mark.parametrize("f, lo, hi, root", [
+    (math.cos, 1.0, 2.0, math.pi / 2),
+    (lambda x: x**3 - 2.0, 0.0, 2.0, 2.0 ** (1.0 / 3.0)),
+    (lambda x: (x - 0.3) ** 9, 0.0, 1.0, 0.3),  # flat: false position stalls, bisection goes on
+    (lambda x: math.exp(x) - 1e10, 0.0, 40.0, math.log(1e10)),
+    (lambda x: x - 1.0, 1.0, 5.0, 1.0),  # a root at an end
+])
+def test_bracketed_root_finder_reaches_the_last_bits(f, lo, hi, root):
+    # The core's own bracketed solver (the runtime needs numpy only, not scipy's brentq).
+    from piezo_fmu.roots import bracketed
+
+    assert abs(bracketed(f, lo, hi) - root) <= 8 * np.spacing(root)
+
+
+def test_bracketed_root_finder_refuses_an_interval_without_a_sign_change():
+    from piezo_fmu.roots import bracketed
+
+    with pytest.raises(ValueError, match="do not bracket a root"):
+        bracketed(math.cos, 0.0, 1.0)
+
+
 def test_one_contact_in_isolation_matches_eq7():
     # K, C of the main mass negligible (as eq. 5-6 assume): the relative motion is eq. 7.
     params = Parameters(K=1e-12, C=0.0, p0=0.0, q0=0.0039, dp0=0.0, dq0=0.5)

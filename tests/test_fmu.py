@@ -624,23 +624,30 @@ def test_fmpy_simulate_on_the_command_line_with_output_interval_and_start_values
     assert_outputs_close(final, expected, rtol=1e-9, scale={"energy_balance_error": 1.0})
 
 
-def test_the_fmu_runs_on_its_own_bundle_with_only_numpy_and_scipy(tmp_path):
-    """A host without piezo_fmu installed (no .pth processing: ``-S``) runs the FMU's copy."""
+def test_the_fmu_runs_on_its_own_bundle_with_only_numpy(tmp_path):
+    """A host without piezo_fmu installed (no .pth processing: ``-S``) runs the FMU's copy, and
+    needs numpy only: scipy is made unimportable in that host."""
     sites = sorted({sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]})
     script = f"""
-import sys, json
+import sys, json, importlib.abc
 sys.path.extend({sites!r})
+class NoScipy(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name.split(".")[0] == "scipy":
+            raise ImportError("this host has no scipy")
+sys.meta_path.insert(0, NoScipy())
 import fmpy
 result = fmpy.simulate_fmu({str(FMU)!r}, stop_time=0.3, output_interval=1e-3)
 core = sys.modules["piezo_fmu"].__file__
 print(json.dumps({{"core": core, "impact_count": int(result["impact_count"][-1]),
-                  "p": float(result["main_displacement"][-1])}}))
+                  "p": float(result["main_displacement"][-1]), "scipy": "scipy" in sys.modules}}))
 """
     env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}
     done = subprocess.run([sys.executable, "-S", "-c", script], capture_output=True, text=True, check=True,
                           cwd=tmp_path, env=env)
     reply = json.loads(done.stdout.strip().splitlines()[-1])
     assert "resources" in Path(reply["core"]).parts and str(ROOT / "src") not in reply["core"]
+    assert reply["scipy"] is False
     expected = core_outputs(Parameters(), 0.3)
     assert reply["impact_count"] == expected["impact_count"]
     assert reply["p"] == pytest.approx(expected["main_displacement"], rel=1e-12)

@@ -13,9 +13,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import brentq
-
 from .parameters import EXPLICIT, Parameters
+from .roots import bracketed
 
 #: Normalisation of the first mode, chosen so that phi_1(L) = 1 (MODEL.md section 4).
 C1 = 0.5
@@ -24,7 +23,7 @@ C1 = 0.5
 @lru_cache(maxsize=1)
 def first_mode_root() -> float:
     """``beta_1 L``: the first root of ``cos(x) cosh(x) + 1 = 0`` (dimensionless)."""
-    return brentq(lambda x: math.cos(x) * math.cosh(x) + 1.0, 1.5, 2.5, xtol=1e-15, rtol=8.9e-16)
+    return bracketed(lambda x: math.cos(x) * math.cosh(x) + 1.0, 1.5, 2.5)
 
 
 @lru_cache(maxsize=1)

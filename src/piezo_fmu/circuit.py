@@ -40,10 +40,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
-
 from .propagation import ORDER, PRIMITIVE_TERMS, STATE_TERMS, THETA, primitive_of_square
-from .roots import crossings
+from .roots import bracketed, crossings
 
 #: ``lam = tau / (R C_p)`` above which the closed form is used (below it, the Taylor series).
 LAM_SPLIT = THETA
@@ -160,7 +158,7 @@ class Piece:
             if f_hi == 0.0:
                 found.append(hi)
             elif f_lo != 0.0 and (f_lo < 0.0) != (f_hi < 0.0):
-                found.append(brentq(self.slope, lo, hi, xtol=1e-17, rtol=4 * np.finfo(float).eps))
+                found.append(bracketed(self.slope, lo, hi, xtol=1e-17))
             f_lo = f_hi
         return [s for s in found if s <= limit]
 

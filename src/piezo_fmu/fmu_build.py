@@ -19,7 +19,7 @@ pythonfmu 0.7.0 builds the archive; this module then completes and freezes it:
 
 The FMU carries the core (the ``piezo_fmu`` package, less this build script and the slave) and
 the slave as the top-level module ``piezo_fmu_slave`` in ``resources/``. At run time it needs
-only a Python 3 host with numpy and scipy.
+only a Python 3 host with numpy.
 """
 
 from __future__ import annotations

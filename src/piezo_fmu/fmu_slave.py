@@ -228,7 +228,7 @@ class PiezoImpactDamper(Fmi2Slave):
 
     author = "piezo-fmu"
     description = ("Piezo-impact damper (Afsharfard and Farshidianfar 2014) driven by base motion; "
-                   "exact event-driven core. Needs Python 3 with numpy and scipy.")
+                   "exact event-driven core. Needs Python 3 with numpy.")
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=2.0, step_size=1e-4)
 
     def __init__(self, **kwargs):
