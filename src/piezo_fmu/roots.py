@@ -212,12 +212,12 @@ def bracketed(f, lo: float, hi: float, xtol: float = 0.0) -> float:
         return hi
     if (f_lo < 0.0) == (f_hi < 0.0):
         raise ValueError(f"f({lo!r}) = {f_lo!r} and f({hi!r}) = {f_hi!r} do not bracket a root")
-    side = 0
+    side, bisect = 0, False
     for _ in range(400):
         width = hi - lo
         if width <= xtol + 4 * EPS * max(abs(lo), abs(hi)):
             break
-        x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        x = 0.5 * (lo + hi) if bisect else (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
         if not lo < x < hi:
             x = 0.5 * (lo + hi)
         fx = f(x)
@@ -233,15 +233,9 @@ def bracketed(f, lo: float, hi: float, xtol: float = 0.0) -> float:
             if side == 1:
                 f_lo *= 0.5
             side = 1
-        if hi - lo > 0.5 * width:  # a slow step: bisect once
-            x = 0.5 * (lo + hi)
-            fx = f(x)
-            if fx == 0.0:
-                return x
-            if (fx < 0.0) == (f_lo < 0.0):
-                lo, f_lo = x, fx
-            else:
-                hi, f_hi = x, fx
+        # A false-position step that did not halve the bracket: bisect once, then start afresh.
+        bisect = not bisect and hi - lo > 0.5 * width
+        if bisect:
             side = 0
     return lo if abs(f_lo) <= abs(f_hi) else hi
 
