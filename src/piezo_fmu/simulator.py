@@ -590,7 +590,7 @@ class Simulator:
             near_zero = abs(start_value) <= max(self._zero, _NOISE_ULPS * EPS * maps.noise_bounds[j] * total)
             if not near_zero and (min(row) > 0.0 or max(row) < 0.0):
                 continue  # one strict sign, away from zero at the start: no root
-            noise = _NOISE_ULPS * EPS * sum(map(operator.mul, noise_rows[j], sizes))
+            noise = _rounding(noise_rows[j], sizes)
             if near_zero and abs(start_value) <= max(self._zero, noise):
                 # At a switch the function that fired is zero to rounding: its sign just after
                 # the start is that of the relative velocity towards the barrier. When that is
@@ -639,7 +639,7 @@ class Simulator:
         row = values[j]
         if min(row) > 0.0 or max(row) < 0.0:
             return []
-        noise = _NOISE_ULPS * EPS * (sum(map(operator.mul, noise_rows[j], sizes)) + (abs(v) if j == 2 else 0.0))
+        noise = _rounding(noise_rows[j], sizes) + (_NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
         return crossings(G[j], -1, B[j], noise, row)
 
     def _contact_piece(self, c: np.ndarray, tau: float, side: int) -> Piece:
@@ -701,7 +701,7 @@ class Simulator:
         reads the ledger every step pays one product per reading)."""
         if br.ledger is None:
             u_rate, delta_rate, force = br.rates
-            weights = self._ledger_weights(br, 1.0)
+            weights = self._ledger_factors(br.tau, br.v)
             br.ledger = np.zeros((3, PRIMITIVE_TERMS))
             primitive_of_square(u_rate, weights[0], out=br.ledger[0])
             primitive_of_square(delta_rate, weights[1], out=br.ledger[1])
@@ -711,7 +711,7 @@ class Simulator:
     def _booked_ledger(self, br: "_Bracket") -> tuple[float, float, float]:
         """What closing the bracket now would book (``_book_pending``)."""
         squares = _ledger_integrals(br.rates[None], br.powers[None, :STATE_TERMS])[0].tolist()
-        weights = self._ledger_weights(br, br.s)
+        weights = self._ledger_factors(br.tau * br.s, br.v)
         return weights[0] * squares[0], weights[1] * squares[1], weights[2] * squares[2]
 
     def _book_pending(self) -> None:
@@ -722,21 +722,19 @@ class Simulator:
         if not n:
             return
         integrals = _ledger_integrals(pending.rates[:n], pending.powers[:n])
-        # The factors of _ledger_weights: C, C_eq and -v, times the span of each bracket.
-        span = pending.span[:n]
-        booked = [(integrals[:, 0] * span * self.params.C).tolist(), (integrals[:, 1] * span * self.params.C_eq).tolist(),
-                  (integrals[:, 2] * span * -pending.v[:n]).tolist()]
+        factors = self._ledger_factors(pending.span[:n], pending.v[:n])
+        booked = [(integrals[:, k] * factors[k]).tolist() for k in range(3)]
         a = self._accounts
         a.dissipated_C += math.fsum(booked[0])
         a.dissipated_Ceq += math.fsum(booked[1])
         a.work_base += math.fsum(booked[2])
         pending.count = 0
 
-    def _ledger_weights(self, br: "_Bracket", s: float) -> tuple[float, float, float]:
-        """Factors of the ledger's rates: ``C``, ``C_eq`` and ``-v``, times the bracket length
-        (the rates are polynomials in normalised time) and ``s`` (``_ledger_integrals``)."""
-        tau = br.tau * s
-        return self.params.C * tau, self.params.C_eq * tau, -br.v * tau
+    def _ledger_factors(self, span, v):
+        """Factors of the ledger's rates: ``C``, ``C_eq`` and ``-v``, times ``span``, the time the
+        bracket has run (the rates are polynomials in normalised time; ``_ledger_integrals``).
+        Floats for one bracket, arrays for a batch."""
+        return self.params.C * span, self.params.C_eq * span, -v * span
 
     def _record_maximum(self, t: float, p: float) -> None:
         self._metrics = None
@@ -871,6 +869,12 @@ def _mirror_signs(n: int) -> np.ndarray:
     signs = np.ones(n)
     signs[ONE:] = -1.0
     return signs
+
+
+def _rounding(row: list[float], sizes: list[float]) -> float:
+    """The rounding level of an event function: ``_NOISE_ULPS`` ulp of the bound on its terms
+    made from one row of ``_BracketMaps.noise_rows`` and the sizes of the start state."""
+    return _NOISE_ULPS * EPS * sum(map(operator.mul, row, sizes))
 
 
 def _ledger_rates(side: int, K: float, C: float, n: int = 5) -> np.ndarray:
