@@ -81,7 +81,7 @@ INPUTS = (
              start=0.0),
 )
 
-OUTPUTS = (
+_FIRST_OUTPUTS = (
     Variable("main_displacement", "Real", "output", "m",
              "Absolute displacement p of the main mass", read=lambda core: core.state.p),
     Variable("main_velocity", "Real", "output", "m/s",
@@ -162,9 +162,20 @@ CALCULATED = (
              min=0.0, read=lambda sim: sim.contact_frequency),
 )
 
-#: The whole table, in value-reference order: parameters, inputs, outputs, calculated parameters
-#: (appended last, so that the earlier value references stay as they were).
-VARIABLES = _parameter_variables() + INPUTS + OUTPUTS + CALCULATED
+#: Outputs added after the calculated parameters (appended, so that no value reference moved).
+_LATER_OUTPUTS = (
+    Variable("damping_inclination_ls", "Real", "output", "m/s",
+             "Robust damping inclination: minus the least-squares slope of the positive maxima of p that "
+             "follow an impact (a companion of eq. 29, insensitive to a double maximum); 0 until two such "
+             "maxima exist",
+             read=lambda core: _zero_until_defined(core.metrics.DI_ls)),
+)
+
+#: The whole table, in value-reference order: parameters, inputs, outputs, calculated parameters,
+#: then the later outputs (each group appended, so that the earlier value references stay as they were).
+VARIABLES = _parameter_variables() + INPUTS + _FIRST_OUTPUTS + CALCULATED + _LATER_OUTPUTS
+#: Every output, in value-reference order.
+OUTPUTS = tuple(spec for spec in VARIABLES if spec.causality == "output")
 
 _CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
               "output": Fmi2Causality.output, "calculatedParameter": Fmi2Causality.calculatedParameter}
