@@ -1,9 +1,10 @@
 """The benchmark's floor: a pythonfmu slave with the piezo FMU's variables that does no work.
 
 It registers the same table (names, types, causalities, start values) as
-``piezo_fmu.fmu_slave`` and reads and writes plain values; ``do_step`` returns at once. Timing
+``piezo_fmu.fmi.fmi2`` and reads and writes plain values; ``do_step`` returns at once. Timing
 the piezo FMU against it through fmpy isolates what the core costs on top of FMI, pythonfmu and
-fmpy. Inside its FMU it imports the table from the bundled ``piezo_fmu_slave`` module.
+fmpy. Inside its FMU it imports the table from the bundled ``piezo_fmu`` package and the piezo
+slave (``piezo_fmu_slave``).
 """
 
 from pythonfmu import DefaultExperiment, Fmi2Slave

@@ -18,7 +18,7 @@ from scipy.linalg import expm
 from scipy.optimize import brentq
 
 from piezo_fmu import Parameters, Simulator, derive_barrier
-from piezo_fmu.parameters import MAX_COUPLED_STIFFNESS
+from piezo_fmu.model.parameters import MAX_COUPLED_STIFFNESS
 from test_core import harmonic_run
 from test_properties import DURATION, base_inputs, chops, dampers, hold_times, run
 

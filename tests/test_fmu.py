@@ -28,8 +28,9 @@ from fmpy.logging import addLoggerProxy
 from fmpy.validation import validate_fmu
 
 from piezo_fmu import Parameters, Simulator, parameter_info
-from piezo_fmu import fmu_build
-from piezo_fmu.fmu_slave import OUTPUTS, CoreView
+from piezo_fmu.fmi import build as fmu_build
+from piezo_fmu.fmi.cosim import CoreView
+from piezo_fmu.fmi.variables import OUTPUTS
 from fmu_host import read_outputs, set_values
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -174,11 +175,11 @@ def test_check_mode_exits_non_zero_on_a_stale_fmu(tmp_path, capsys):
     with zipfile.ZipFile(FMU) as source, zipfile.ZipFile(stale, "w") as target:
         for info in source.infolist():
             data = source.read(info)
-            if info.filename == "resources/piezo_fmu/parameters.py":
+            if info.filename == "resources/piezo_fmu/model/parameters.py":
                 data += b"\n# edited\n"
             target.writestr(info, data)
     assert fmu_build.main(["--check", "--dest", str(stale)]) == 1
-    assert "resources/piezo_fmu/parameters.py" in capsys.readouterr().err
+    assert "resources/piezo_fmu/model/parameters.py" in capsys.readouterr().err
     fresh = tmp_path / "fresh.fmu"
     fmu_build.main(["--dest", str(fresh)])
     assert fmu_build.main(["--check", "--dest", str(fresh)]) == 0
@@ -188,10 +189,10 @@ def test_fmu_bundles_the_core_and_the_slave_but_no_build_tooling():
     with zipfile.ZipFile(FMU) as archive:
         names = set(archive.namelist())
         assert archive.read("resources/slavemodule.txt").decode() == fmu_build.SLAVE_MODULE
-    for module in ("__init__", "parameters", "barrier", "simulator"):
+    for module in ("__init__", "model/parameters", "model/barrier", "solver/simulator", "fmi/variables", "fmi/cosim"):
         assert f"resources/piezo_fmu/{module}.py" in names
     assert f"resources/{fmu_build.SLAVE_MODULE}.py" in names
-    assert "resources/piezo_fmu/fmu_build.py" not in names
+    assert "resources/piezo_fmu/fmi/build.py" not in names and "resources/piezo_fmu/fmi/fmi2.py" not in names
     assert {"binaries/linux64/PiezoImpactDamper.so", "binaries/win64/PiezoImpactDamper.dll"} <= names
 
 

@@ -54,7 +54,8 @@ from fmpy.logging import addLoggerProxy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from piezo_fmu import EXPLICIT, Parameters, derive_barrier, fmu_build, parameter_info
+from piezo_fmu import EXPLICIT, Parameters, derive_barrier, parameter_info
+from piezo_fmu.fmi import build as fmu_build
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

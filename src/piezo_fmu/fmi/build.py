@@ -1,9 +1,9 @@
-"""Build ``fmus/PiezoImpactDamper.fmu`` from :mod:`piezo_fmu.fmu_slave`, reproducibly.
+"""Build ``fmus/PiezoImpactDamper.fmu`` from :mod:`piezo_fmu.fmi.fmi2`, reproducibly.
 
 Usage (from the repository root)::
 
-    python -m piezo_fmu.fmu_build            # (re)write fmus/PiezoImpactDamper.fmu
-    python -m piezo_fmu.fmu_build --check    # exit 1 if the committed FMU is stale
+    python -m piezo_fmu.fmi.build            # (re)write fmus/PiezoImpactDamper.fmu
+    python -m piezo_fmu.fmi.build --check    # exit 1 if the committed FMU is stale
 
 pythonfmu 0.7.0 builds the archive; this module then completes and freezes it:
 
@@ -17,8 +17,8 @@ pythonfmu 0.7.0 builds the archive; this module then completes and freezes it:
   uncompressed (so the bytes do not depend on the zlib build), without ``__pycache__``. A rebuild
   from the same sources is byte-identical, which is what ``--check`` relies on.
 
-The FMU carries the core (the ``piezo_fmu`` package, less this build script and the slave) and
-the slave as the top-level module ``piezo_fmu_slave`` in ``resources/``. At run time it needs
+The FMU carries the core (the ``piezo_fmu`` package, less the build and the slaves) and the
+slave as the top-level module ``piezo_fmu_slave`` in ``resources/``. At run time it needs
 only a Python 3 host with numpy.
 """
 
@@ -39,17 +39,17 @@ from typing import Iterable, Optional
 
 from pythonfmu import FmuBuilder
 
-from piezo_fmu.fmu_slave import VARIABLES, Variable
+from piezo_fmu.fmi.variables import VARIABLES, Variable
 
-PACKAGE_DIR = Path(__file__).resolve().parent
-SLAVE_SOURCE = PACKAGE_DIR / "fmu_slave.py"
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+SLAVE_SOURCE = PACKAGE_DIR / "fmi" / "fmi2.py"
 #: Module name of the slave inside the FMU: unique, so that it cannot clash in ``sys.modules``
 #: with another pythonfmu FMU loaded into the same host process.
 SLAVE_MODULE = "piezo_fmu_slave"
 MODEL_IDENTIFIER = "PiezoImpactDamper"
 DEFAULT_DEST = Path("fmus") / f"{MODEL_IDENTIFIER}.fmu"
 #: Files of the package that the FMU does not need at run time (the slave travels as SLAVE_MODULE).
-NOT_BUNDLED = frozenset({"fmu_build.py", "fmu_slave.py"})
+NOT_BUNDLED = frozenset({"fmi/build.py", "fmi/fmi2.py"})
 
 #: CoSimulation capability flags (pythonfmu defaults otherwise).
 CAPABILITIES = {
@@ -128,7 +128,7 @@ def complete_model_description(xml: bytes, variables: Iterable[Variable]) -> ET.
     by_name = {spec.name: spec for spec in variables}
 
     root.attrib.pop("generationDateAndTime", None)  # a timestamp would break reproducibility
-    root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmu_build")
+    root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmi.build")
     root.set("guid", "")
     cosim = root.find("CoSimulation")
     for flag, value in CAPABILITIES.items():
@@ -336,7 +336,7 @@ def check(dest: Path = DEFAULT_DEST) -> list[str]:
 
 
 def main(argv: Optional[list[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m piezo_fmu.fmu_build", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m piezo_fmu.fmi.build", description=__doc__.split("\n\n")[0])
     parser.add_argument("--dest", type=Path, default=DEFAULT_DEST, help=f"FMU path (default {DEFAULT_DEST})")
     parser.add_argument("--check", action="store_true",
                         help="do not write; exit 1 if the FMU at --dest differs from a rebuild")

@@ -13,8 +13,16 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from .parameters import EXPLICIT, Parameters
-from .roots import bracketed
+
+from .scalar import bracketed
+
+#: ``barrier_mode`` values: derive ``M_eq``/``K_eq`` from the beam geometry, or take them as given.
+DERIVED = 0
+EXPLICIT = 1
+#: The equivalent mass and stiffness printed in the paper (kg, N/m); see the README's departures
+#: from the paper: they cannot be derived from Table 1.
+PRINTED_M_EQ = 0.0292
+PRINTED_K_EQ = 46.7753e6
 
 #: Normalisation of the first mode, chosen so that phi_1(L) = 1 (MODEL.md section 4).
 C1 = 0.5
@@ -114,8 +122,9 @@ class Barrier:
     chi: float = 0.0
 
 
-def derive_barrier(params: Parameters) -> Barrier:
-    """Barrier equivalents of ``params``.
+def derive_barrier(params) -> Barrier:
+    """Barrier equivalents of ``params`` (a :class:`~piezo_fmu.model.parameters.Parameters`, or any
+    object with its beam, patch and barrier-mode attributes).
 
     With ``barrier_mode = 0`` (default) ``M_eq`` and ``K_eq`` follow from the geometry by
     eqs. 22-23; with ``barrier_mode = 1`` the given ``params.M_eq`` and ``params.K_eq`` pass
