@@ -5,7 +5,8 @@
 - No import cycle between modules, inside the package or the harness (lazy imports in functions
   count too).
 - No module over 400 lines, no class over 250.
-- No file of the project points at ``../shared``: a user's clone has no such folder.
+- No file of the project points at the team's folder beside the clone (``..`` then ``shared``): a
+  user's clone has no such folder.
 """
 
 from __future__ import annotations

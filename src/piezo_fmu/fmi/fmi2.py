@@ -66,25 +66,23 @@ class PiezoImpactDamper(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        # The getters and setters by value reference (the order of VARIABLES). pythonfmu's variable
-        # objects are made only for the model description (to_xml): every fmi2Reset builds a new
-        # instance, and 54 of them cost 5% of a 2 s sweep point.
         self._cosim = CoSimulation(lambda message: self.log(message, Fmi2Status.error))
-        self._getters, self._setters = self._cosim.getters, self._cosim.setters
 
     def to_xml(self, model_options: Dict[str, str] = dict()):  # noqa: B006 - pythonfmu's signature
+        # pythonfmu's variable objects are made only for the model description: every fmi2Reset
+        # builds a new instance, and 54 of them cost 5% of a 2 s sweep point.
         if not self.vars:
-            for spec, getter, setter in zip(VARIABLES, self._getters, self._setters):
-                self.register_variable(scalar_variable(spec, getter, setter), nested=False)
+            cosim = self._cosim
+            for vr, spec in enumerate(VARIABLES):
+                setter = (lambda value, vr=vr: cosim.set([vr], [value])) if spec.causality in ("parameter", "input") else None
+                self.register_variable(scalar_variable(spec, lambda vr=vr: cosim.get([vr])[0], setter), nested=False)
         return super().to_xml(model_options)
 
     def get_real(self, vrs: List[int]) -> List[float]:
-        getters = self._getters
-        return [float(getters[vr]()) for vr in checked(vrs, "Real")]
+        return self._cosim.get(checked(vrs, "Real"))
 
     def get_integer(self, vrs: List[int]) -> List[int]:
-        getters = self._getters
-        return [int(getters[vr]()) for vr in checked(vrs, "Integer")]
+        return self._cosim.get(checked(vrs, "Integer"))
 
     def set_real(self, vrs: List[int], values: List[float]):
         self._cosim.set(checked(vrs, "Real"), values)

@@ -20,8 +20,10 @@ class Variable(NamedTuple):
     """One FMU variable: what the modelDescription says of it and how to read it from the core.
 
     ``unit``, ``min`` and ``max`` are written by :mod:`piezo_fmu.fmi.build` (pythonfmu writes
-    none of them). ``read`` maps a :class:`piezo_fmu.fmi.cosim.CoreView` of the core to an
-    output's value, or the :class:`piezo_fmu.Simulator` to a calculated parameter's.
+    none of them). An output's value is the core's reading of the same name
+    (:meth:`piezo_fmu.Simulator.readings`), 0 where ``undefined_is_zero`` and the reading is NaN
+    (a metric not defined yet); ``read`` maps the :class:`piezo_fmu.Damper` to a calculated
+    parameter's value.
     """
 
     name: str
@@ -32,12 +34,8 @@ class Variable(NamedTuple):
     min: Optional[float] = None
     max: Optional[float] = None
     start: Optional[float] = None  # parameters and inputs only
-    read: Optional[Callable] = None  # outputs only
-
-
-def _zero_until_defined(value: float) -> float:
-    """The core reports a not-yet-defined metric as NaN; the FMU output is 0 until then."""
-    return 0.0 if math.isnan(value) else value
+    read: Optional[Callable] = None  # calculated parameters only
+    undefined_is_zero: bool = False  # outputs only
 
 
 def _parameter_variables() -> tuple:
@@ -73,71 +71,63 @@ INPUTS = (
 
 _FIRST_OUTPUTS = (
     Variable("main_displacement", "Real", "output", "m",
-             "Absolute displacement p of the main mass", read=lambda core: core.state.p),
+             "Absolute displacement p of the main mass"),
     Variable("main_velocity", "Real", "output", "m/s",
-             "Absolute velocity dp/dt of the main mass", read=lambda core: core.state.dp),
+             "Absolute velocity dp/dt of the main mass"),
     Variable("impactor_displacement", "Real", "output", "m",
-             "Absolute displacement q of the impact mass", read=lambda core: core.state.q),
+             "Absolute displacement q of the impact mass"),
     Variable("impactor_velocity", "Real", "output", "m/s",
-             "Absolute velocity dq/dt of the impact mass", read=lambda core: core.state.dq),
+             "Absolute velocity dq/dt of the impact mass"),
     Variable("deflection_left", "Real", "output", "m",
              "Tip deflection of the left barrier (r = -d/2); 0 while not in contact",
-             min=0.0, read=lambda core: core.sim.deflection(-1)),
+             min=0.0),
     Variable("deflection_right", "Real", "output", "m",
              "Tip deflection of the right barrier (r = +d/2); 0 while not in contact",
-             min=0.0, read=lambda core: core.sim.deflection(+1)),
+             min=0.0),
     Variable("voltage_left", "Real", "output", "V",
              "Voltage of the left barrier's piezoelectric patch (voltage_model 0: quasi-static, eqs. 25-28, "
-             ">= 0; 1 and 2: across the load, signed)",
-             read=lambda core: core.sim.voltage(-1)),
+             ">= 0; 1 and 2: across the load, signed)"),
     Variable("voltage_right", "Real", "output", "V",
              "Voltage of the right barrier's piezoelectric patch (voltage_model 0: quasi-static, eqs. 25-28, "
-             ">= 0; 1 and 2: across the load, signed)",
-             read=lambda core: core.sim.voltage(+1)),
+             ">= 0; 1 and 2: across the load, signed)"),
     Variable("base_force", "Real", "output", "N",
-             "Force the device exerts on its base (spring K and damper C of the main mass), along +x",
-             read=lambda core: core.sim.base_force),
+             "Force the device exerts on its base (spring K and damper C of the main mass), along +x"),
     Variable("impact_count", "Integer", "output", None,
-             "Number of impacts (contact onsets) so far, both barriers", min=0,
-             read=lambda core: core.metrics.impact_count),
+             "Number of impacts (contact onsets) so far, both barriers", min=0),
     Variable("last_impact_voltage", "Real", "output", "V",
-             "Peak voltage of the latest completed impact (eq. 28); 0 before the first", min=0.0,
-             read=lambda core: core.metrics.last_impact_voltage),
+             "Peak voltage of the latest completed impact (eq. 28); 0 before the first", min=0.0),
     Variable("voltage_rms", "Real", "output", "V",
-             "RMS of the peak voltages of the impacts completed so far (eq. 30)", min=0.0,
-             read=lambda core: core.metrics.V_rms),
+             "RMS of the peak voltages of the impacts completed so far (eq. 30)", min=0.0),
     Variable("average_power", "Real", "output", "W",
-             "Average power V_rms^2 / R_load (eq. 30)", min=0.0,
-             read=lambda core: core.metrics.P_ave),
+             "Average power V_rms^2 / R_load (eq. 30)", min=0.0),
     Variable("damping_inclination", "Real", "output", "m/s",
              "Damping inclination (P1 - P2) / (t2 - t1) from the first two maxima of p (eq. 29); "
              "0 until two maxima exist",
-             read=lambda core: _zero_until_defined(core.metrics.DI)),
+             undefined_is_zero=True),
     Variable("energy_dissipated", "Real", "output", "J",
              "Energy dissipated since the start (damping, contact, barrier capture and release)",
-             min=0.0, read=lambda core: core.energy.dissipated),
+             min=0.0),
     Variable("energy_balance_error", "Real", "output", "J",
              "Energy ledger residual: energy now - (initial energy + work by the base - dissipated); "
-             "0 to rounding",
-             read=lambda core: core.energy.balance_error),
+             "0 to rounding"),
     Variable("harvested_energy", "Real", "output", "J",
              "Energy harvested in the loads of both barriers since the start, integral of V^2/R_load dt "
              "(voltage_model 1 and 2; 0 under the quasi-static model 0, an open-circuit voltage)",
-             min=0.0, read=lambda core: core.energy.harvested),
+             min=0.0),
     Variable("power_left", "Real", "output", "W",
              "Instantaneous power V^2/R_load into the left barrier's load (0 under voltage_model 0)",
-             min=0.0, read=lambda core: core.sim.power(-1)),
+             min=0.0),
     Variable("power_right", "Real", "output", "W",
              "Instantaneous power V^2/R_load into the right barrier's load (0 under voltage_model 0)",
-             min=0.0, read=lambda core: core.sim.power(+1)),
+             min=0.0),
     Variable("harvested_energy_left", "Real", "output", "J",
              "Energy harvested in the left barrier's load since the start, integral of V^2/R_load dt "
              "(0 under voltage_model 0)",
-             min=0.0, read=lambda core: core.energy.harvested_left),
+             min=0.0),
     Variable("harvested_energy_right", "Real", "output", "J",
              "Energy harvested in the right barrier's load since the start, integral of V^2/R_load dt "
              "(0 under voltage_model 0)",
-             min=0.0, read=lambda core: core.energy.harvested_right),
+             min=0.0),
 )
 
 #: Quantities the FMU derives from its parameters (FMI calculatedParameter): what a designer
@@ -145,11 +135,11 @@ _FIRST_OUTPUTS = (
 CALCULATED = (
     Variable("patch_capacitance", "Real", "calculatedParameter", "F",
              "Capacitance C_p = eps33 W_p L_p / t_p of each barrier's piezoelectric patch (MODEL.md section 5)",
-             min=0.0, read=lambda sim: sim.barrier.C_p),
+             min=0.0, read=lambda damper: damper.barrier.C_p),
     Variable("contact_frequency", "Real", "calculatedParameter", "rad/s",
              "Undamped angular frequency sqrt(K_eq / mu) of the relative motion in contact, mu the reduced "
              "mass of M - M_eq and m + M_eq (short-circuited patch)",
-             min=0.0, read=lambda sim: sim.contact_frequency),
+             min=0.0, read=lambda damper: damper.contact_frequency),
 )
 
 #: Outputs added after the calculated parameters (appended, so that no value reference moved).
@@ -158,7 +148,7 @@ _LATER_OUTPUTS = (
              "Robust damping inclination: minus the least-squares slope of the positive maxima of p that "
              "follow an impact (a companion of eq. 29, insensitive to a double maximum); 0 until two such "
              "maxima exist",
-             read=lambda core: _zero_until_defined(core.metrics.DI_ls)),
+             undefined_is_zero=True),
 )
 
 #: The whole table, in value-reference order: parameters, inputs, outputs, calculated parameters,

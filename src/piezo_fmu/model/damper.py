@@ -103,10 +103,11 @@ class Damper:
     def mechanical_energy(self, side: int, p: float, dp: float, q: float, dq: float, y: float) -> tuple[float, float, float]:
         """Kinetic energy, and the potential energies of ``K`` and of the barrier in contact (J),
         in phase ``side`` with the base at ``y`` (m)."""
-        M_main, m_impact = self.masses(side)
-        kinetic = energy.kinetic(M_main, m_impact, dp, dq)
-        potential_Keq = 0.0 if side == FREE else energy.spring(self.barrier.K_eq, self.deflection(side, p, q))
-        return kinetic, energy.spring(self.params.K, p - y), potential_Keq
+        params = self.params
+        if side == FREE:
+            return energy.kinetic(params.M, params.m, dp, dq), energy.spring(params.K, p - y), 0.0
+        return (energy.kinetic(self.M_contact, self.m_contact, dp, dq), energy.spring(params.K, p - y),
+                energy.spring(self.barrier.K_eq, energy.deflection(side, params.d, p, q)))
 
     @property
     def contact_frequency(self) -> float:

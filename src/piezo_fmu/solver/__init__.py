@@ -13,6 +13,6 @@
 from .ledger import EnergyLedger
 from .metrics import Metrics, perfectibility
 from .records import Impact, State
-from .simulator import Simulator
+from .simulator import READINGS, Simulator
 
-__all__ = ["EnergyLedger", "Impact", "Metrics", "Simulator", "State", "perfectibility"]
+__all__ = ["EnergyLedger", "Impact", "Metrics", "READINGS", "Simulator", "State", "perfectibility"]

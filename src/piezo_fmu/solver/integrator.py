@@ -147,7 +147,7 @@ class Integrator:
     def _move_to(self, br: Bracket, s: float, t: float) -> None:
         """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
         br.powers = POWERS_AT_END if s == 1.0 else powers(s)
-        u, w, du, dw = np.dot(br.powers[:STATE_TERMS], br.c).tolist()[:4]
+        u, w, du, dw = br.powers[:STATE_TERMS].dot(br.c).tolist()[:4]  # ndarray.dot: np.dot without its dispatch
         base = br.base + br.v * s * br.tau
         self.t = t
         self._p, self._q = u + base, w + base

@@ -142,7 +142,7 @@ class Ledger:
         self.work_base += math.fsum(booked[2])
         self._count = 0
 
-    def open_reading(self, br: Bracket) -> tuple[float, float, float]:
+    def open_reading(self, br: Bracket) -> list[float]:
         """Dissipation in ``C`` and ``C_eq`` and work of the base (J) on the open bracket so far,
         read from the primitives of the rates (made on the first reading of the bracket: a host
         that reads the ledger every step pays one product per reading)."""
@@ -153,7 +153,7 @@ class Ledger:
             primitive_of_square(u_rate, weights[0], out=br.ledger[0])
             primitive_of_square(delta_rate, weights[1], out=br.ledger[1])
             primitive(force, weights[2], out=br.ledger[2])
-        return tuple((br.ledger @ br.powers).tolist())
+        return br.ledger.dot(br.powers).tolist()
 
     def booked(self, br: Bracket) -> tuple[float, float, float]:
         """What closing the bracket now would book (:meth:`book_pending`)."""
@@ -164,7 +164,8 @@ class Ledger:
     def flows(self, br: Bracket | None) -> tuple[float, float, float, float]:
         """``dissipated_C``, ``dissipated_Ceq``, ``plastic`` and ``work_base`` (J) so far, the open
         bracket ``br`` (if any) included."""
-        self.book_pending()
+        if self._count:
+            self.book_pending()
         open_C, open_Ceq, open_base = self.open_reading(br) if br is not None else (0.0, 0.0, 0.0)
         return self.dissipated_C + open_C, self.dissipated_Ceq + open_Ceq, self.plastic, self.work_base + open_base
 

@@ -17,6 +17,14 @@ from .records import Impact, State
 from .snapshot import restore_into, snapshot_of
 
 
+#: The names of :meth:`Simulator.readings`, in the order of :meth:`Simulator.reading_values`.
+READINGS = ("main_displacement", "main_velocity", "impactor_displacement", "impactor_velocity", "deflection_left",
+            "deflection_right", "voltage_left", "voltage_right", "base_force", "impact_count", "last_impact_voltage",
+            "voltage_rms", "average_power", "damping_inclination", "energy_dissipated", "energy_balance_error",
+            "harvested_energy", "power_left", "power_right", "harvested_energy_left", "harvested_energy_right",
+            "damping_inclination_ls")
+
+
 class Simulator(Integrator):
     """The damper from ``t0`` on, advanced by :meth:`advance` with any chop of time, and read.
 
@@ -79,6 +87,33 @@ class Simulator(Integrator):
     def base_force(self) -> float:
         """Force (N) the device exerts on its base through ``K`` and ``C``, positive along +x."""
         return self.params.K * (self._p - self._y) + self.params.C * (self._dp - self._v)
+
+    def readings(self) -> dict:
+        """Every quantity a host may read at the present instant, by name (:data:`READINGS`), SI:
+        the state, the deflections, voltages and load powers of both barriers, the base force, the
+        metrics (DI and DI_ls NaN until defined) and the energy ledger's totals. The FMUs' outputs
+        are these."""
+        return dict(zip(READINGS, self.reading_values()))
+
+    def reading_values(self) -> tuple:
+        """The values of :meth:`readings`, in the order of :data:`READINGS` (what a host that reads
+        them all at every step calls)."""
+        side = self._side
+        deflection = self.deflection(side) if side else 0.0
+        left, right = (deflection, 0.0) if side == LEFT else (0.0, deflection)
+        metrics, energy = self.metrics, self.energy
+        if self._circuit is None:
+            k_V = self.barrier.k_V
+            v_left, v_right = quasi_static(k_V, left), quasi_static(k_V, right)
+            power_left = power_right = 0.0
+        else:
+            v_left, v_right = self._circuit_now(LEFT)[0], self._circuit_now(RIGHT)[0]
+            R = self.params.R_load
+            power_left, power_right = v_left * v_left / R, v_right * v_right / R
+        return (self._p, self._dp, self._q, self._dq, left, right, v_left, v_right, self.base_force,
+                metrics.impact_count, metrics.last_impact_voltage, metrics.V_rms, metrics.P_ave, metrics.DI,
+                energy.dissipated, energy.balance_error, energy.harvested, power_left, power_right,
+                energy.harvested_left, energy.harvested_right, metrics.DI_ls)
 
     @property
     def impacts(self) -> list[Impact]:
