@@ -1,4 +1,4 @@
-"""The nominal case (MODEL.md section 7, the paper's Fig. 3), run through the FMU with fmpy.
+"""The nominal case (docs/model.md section 7, the paper's Fig. 3), run through the FMU with fmpy.
 
 Table 1 with ``p(0) = q(0) = 10 mm``, base at rest, ``R_L = 52 kOhm``: the FMU's start values.
 Writes into the results folder:
@@ -113,7 +113,7 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     files.update(fig3a=fig3a, fig3b=fig3b)
 
     summary = {
-        "case": "nominal (MODEL.md section 7): Table 1, p(0) = q(0) = 10 mm, base at rest, R_load = 52 kOhm",
+        "case": "nominal (docs/model.md section 7): Table 1, p(0) = q(0) = 10 mm, base at rest, R_load = 52 kOhm",
         "duration_s": stop_time,
         "communication_step_s": step,
         **metrics_at_end(with_damper),

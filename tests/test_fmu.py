@@ -283,7 +283,7 @@ def test_calculated_parameters_follow_the_start_values_in_closed_form(unzipdir, 
     C_p, omega_c = host.fmu.getReal([by_name[name].valueReference for name in ("patch_capacitance", "contact_frequency")])
     host.close()
     params = Parameters(**values)
-    # Closed forms (MODEL.md section 5; the reduced mass of the two contact bodies), not the core's code.
+    # Closed forms (docs/model.md section 5; the reduced mass of the two contact bodies), not the core's code.
     sim = Simulator(params)
     M_eq, K_eq = sim.barrier.M_eq, sim.barrier.K_eq
     mu = 1.0 / (1.0 / (params.M - M_eq) + 1.0 / (params.m + M_eq))

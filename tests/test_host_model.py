@@ -3,7 +3,7 @@
 1. ``hosts/native_host.c`` is built here with the system C compiler against the FMI 2.0
    headers and loads ``binaries/linux64/PiezoImpactDamper.so`` from the extracted FMU. Without
    libpython in the process the binary cannot be loaded (proved); under the launcher
-   ``hosts/run_native_host.sh`` the nominal case (MODEL.md section 7, 2 s at a 1 ms step) runs
+   ``hosts/run_native_host.sh`` the nominal case (docs/model.md section 7, 2 s at a 1 ms step) runs
    cleanly, exits with status 0 and nothing on stderr, and its results equal fmpy's bit for bit.
 2. ``hosts/system/OspSystemStructure.xml`` couples ``PrimaryStructure.fmu`` (an SDOF floor on a
    synthetic ground-motion record, built here from ``hosts/primary_structure.py``) with the

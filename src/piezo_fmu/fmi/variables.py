@@ -134,7 +134,7 @@ _FIRST_OUTPUTS = (
 #: needs to choose a load, ``R_opt ~ 1 / (contact_frequency patch_capacitance)``.
 CALCULATED = (
     Variable("patch_capacitance", "Real", "calculatedParameter", "F",
-             "Capacitance C_p = eps33 W_p L_p / t_p of each barrier's piezoelectric patch (MODEL.md section 5)",
+             "Capacitance C_p = eps33 W_p L_p / t_p of each barrier's piezoelectric patch (docs/model.md section 5)",
              min=0.0, read=lambda damper: damper.barrier.C_p),
     Variable("contact_frequency", "Real", "calculatedParameter", "rad/s",
              "Undamped angular frequency sqrt(K_eq / mu) of the relative motion in contact, mu the reduced "

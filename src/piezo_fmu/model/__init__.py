@@ -1,4 +1,4 @@
-"""The physics of the piezo-impact damper, and nothing else (MODEL.md).
+"""The physics of the piezo-impact damper, and nothing else (docs/model.md).
 
 - :mod:`.parameters`: the parameters (SI, the paper's symbols) and their validation;
 - :mod:`.barrier`: the barrier beam's tip equivalents and the patch constants (eqs. 11-28);

@@ -1,8 +1,8 @@
-"""The barrier: a clamped-free steel beam with one piezoelectric patch (MODEL.md section 4-5).
+"""The barrier: a clamped-free steel beam with one piezoelectric patch (docs/model.md section 4-5).
 
 Derives the tip-referred equivalents ``M_eq`` and ``K_eq`` (eqs. 22-23) from the first
 cantilever mode, the quasi-static voltage gain ``k_V`` (eqs. 25-27, with the patch-average
-curvature of MODEL.md section 5), and the patch as a circuit element: its capacitance ``C_p`` and
+curvature of docs/model.md section 5), and the patch as a circuit element: its capacitance ``C_p`` and
 electromechanical coupling ``chi`` (eqs. 20-21).
 """
 
@@ -24,7 +24,7 @@ EXPLICIT = 1
 PRINTED_M_EQ = 0.0292
 PRINTED_K_EQ = 46.7753e6
 
-#: Normalisation of the first mode, chosen so that phi_1(L) = 1 (MODEL.md section 4).
+#: Normalisation of the first mode, chosen so that phi_1(L) = 1 (docs/model.md section 4).
 C1 = 0.5
 
 
@@ -137,7 +137,7 @@ def derive_barrier(params) -> Barrier:
     phi2_patch = integral_phi_squared(params.x1, x2, L)
 
     EI_b = params.E_b * params.W_b * params.t_b**3 / 12.0
-    # MODEL.md decision (neutral axis): the true offset, half of the printed eq. 15.
+    # docs/model.md, decision (neutral axis): the true offset, half of the printed eq. 15.
     z_n = params.E_p * params.t_p * (params.t_b + params.t_p) / (2.0 * (params.E_b * params.t_b + params.E_p * params.t_p))
     EI_p = params.E_p * params.W_p * params.t_p / 12.0 * (params.t_p**2 + 3.0 * (params.t_p + params.t_b - 2.0 * z_n) ** 2)
 
@@ -147,13 +147,13 @@ def derive_barrier(params) -> Barrier:
         M_eq = params.rho_b * params.t_b * params.W_b * eta1 + params.rho_p * params.t_p * params.W_p * phi2_patch
         K_eq = EI_b * eta1 * beta1**4 + EI_p * beta1**4 * phi2_patch
 
-    # MODEL.md decision (where the strain is read): patch-average curvature per unit tip deflection.
+    # docs/model.md, decision (where the strain is read): patch-average curvature per unit tip deflection.
     phi_L = float(mode_shape(L, L))
     slope_change = float(mode_slope(x2, L) - mode_slope(params.x1, L))
     kappa_bar = slope_change / (params.L_p * phi_L)
     y_p = (params.t_b + params.t_p) / 2.0 - z_n
     k_V = params.g31 * params.E_p * params.L_p * y_p * abs(kappa_bar)
-    # The circuit (eqs. 20-21; MODEL.md section 5, decision "the electrode gap"): magnitudes, so
+    # The circuit (eqs. 20-21; docs/model.md section 5, decision "the electrode gap"): magnitudes, so
     # that the voltage of the barrier in contact is positive while its deflection grows.
     C_p = params.eps33 * params.W_p * params.L_p / params.t_p
     e31 = abs(params.d31) * params.E_p

@@ -28,7 +28,7 @@ class Damper:
     params : the parameters.
     barrier : the barrier equivalents (eqs. 11-23) and the patch constants.
     M_contact, m_contact : kg, the masses of the main body and of the impact body in contact,
-        ``M - M_eq`` and ``m + M_eq`` (MODEL.md section 3).
+        ``M - M_eq`` and ``m + M_eq`` (docs/model.md section 3).
     free, contact : the state matrices of free flight and of contact with the right barrier
         (:mod:`piezo_fmu.model.dynamics`); read-only.
     free_rho : 1/s, the spectral radius of ``free``.

@@ -1,4 +1,4 @@
-"""The equations of motion of the damper, phase by phase (MODEL.md sections 1-3).
+"""The equations of motion of the damper, phase by phase (docs/model.md sections 1-3).
 
 Every phase is linear. In deviation coordinates from the base, ``u = p - y`` and ``w = q - y``,
 the state ``x = (u, w, u', w', 1)`` obeys ``x' = A x`` with ``A`` fixed per phase (free flight,
@@ -10,7 +10,7 @@ under a first-order hold of the base (``y'' = 0``) they are also ``u''`` and ``w
 ``x' = A x`` is the whole motion.
 
 Also here: the event functions of each phase, as linear functionals of the state, and the
-momentum-exact switch rules (MODEL.md section 3, decision "momentum-exact mass bookkeeping").
+momentum-exact switch rules (docs/model.md section 3, decision "momentum-exact mass bookkeeping").
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def free_spectral_radius(M: float, K: float, C: float) -> float:
 
 def contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: float, d: float, side: int,
                    coupling: tuple[float, float, float] | None = None) -> np.ndarray:
-    """Contact with the barrier on ``side`` (MODEL.md section 3, eqs. 3-6) on x = (u, w, u', w', 1).
+    """Contact with the barrier on ``side`` (docs/model.md section 3, eqs. 3-6) on x = (u, w, u', w', 1).
 
     ``s F = K_eq (w - u) + C_eq (w' - u') - s K_eq d/2`` acts on the main body (mass
     ``M1 = M - M_eq``) and its opposite on the impact body (mass ``m1 = m + M_eq``). With

@@ -1,4 +1,4 @@
-"""The energies of the damper and the rates of its energy flows (MODEL.md sections 3 and 5).
+"""The energies of the damper and the rates of its energy flows (docs/model.md sections 3 and 5).
 
 The mechanical energy is kinetic, plus the potential energy of the main spring ``K`` (stretched
 by ``p - y``) and of the barrier in contact (``K_eq``, deflected by ``delta``). It changes by the
@@ -26,7 +26,7 @@ def spring(stiffness: float, stretch: float) -> float:
 
 
 def deflection(side: int, d: float, p: float, q: float) -> float:
-    """Tip deflection ``delta = side (q - p) - d/2`` (m) of the barrier on ``side`` (MODEL.md
+    """Tip deflection ``delta = side (q - p) - d/2`` (m) of the barrier on ``side`` (docs/model.md
     section 3); positive while the impact mass presses into it."""
     return side * (q - p) - d / 2
 

@@ -1,4 +1,4 @@
-"""The patch voltage (MODEL.md section 5, eqs. 20-28).
+"""The patch voltage (docs/model.md section 5, eqs. 20-28).
 
 Three models (``voltage_model``):
 

@@ -1,4 +1,4 @@
-"""The patch voltage as a circuit (MODEL.md section 5, eqs. 20-21): exact on every bracket.
+"""The patch voltage as a circuit (docs/model.md section 5, eqs. 20-21): exact on every bracket.
 
 The patch is a capacitance ``C_p`` across the load ``R``, driven by the barrier's deflection rate:
 ``C_p V' + V / R = chi delta'``. Its electrical rate ``1 / (R C_p)`` (5.6e4 1/s at the nominal

@@ -1,4 +1,4 @@
-"""The advance loop of the exact event-driven integration (MODEL.md sections 1-6).
+"""The advance loop of the exact event-driven integration (docs/model.md sections 1-6).
 
 The motion alternates between two linear phases of the model (:mod:`piezo_fmu.model`): free
 flight, and contact with one barrier. Each is propagated exactly (``propagation.py``), a bracket
@@ -7,7 +7,7 @@ at a time; phase switches, the deflection peaks that give the impact voltages, a
 (``brackets.py``, ``roots.py``); the switches apply the model's momentum-exact rules. Nothing is
 stepped with a fixed step.
 
-The patch voltage follows ``params.voltage_model`` (MODEL.md section 5): 0, the paper's
+The patch voltage follows ``params.voltage_model`` (docs/model.md section 5): 0, the paper's
 quasi-static ``V = k_V delta`` (no circuit state at all); 1, the patch capacitance and load as a
 circuit driven one way by the barrier; 2, the same circuit acting back on the barrier in contact.
 Under 1 and 2 each barrier has its own voltage, exact in closed form between contacts and on
