@@ -42,8 +42,8 @@ def time_run(unzipdir: str, model_description) -> tuple[float, float]:
 
 def build_floor(dest: Path) -> None:
     """Build the no-work FMU in a child process (which imports piezo_fmu; this one must not)."""
-    code = ("import sys; from pathlib import Path; from piezo_fmu.fmi.build import build_bytes; "
-            f"Path({str(dest)!r}).write_bytes(build_bytes(Path({str(HERE / 'null_slave.py')!r})))")
+    code = ("import sys; from pathlib import Path; from piezo_fmu.fmi.build import FMI2, build_bytes; "
+            f"Path({str(dest)!r}).write_bytes(build_bytes(FMI2, Path({str(HERE / 'null_slave.py')!r})))")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert "piezo_fmu" not in sys.modules
 

@@ -10,6 +10,7 @@ are those of :data:`piezo_fmu.fmi.variables.VARIABLES`, by value reference.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from typing import Callable, Optional
 
@@ -48,6 +49,27 @@ _SET_BY_HOST = frozenset(_BY_CAUSALITY["parameter"] + _BY_CAUSALITY["input"])
 #: Output and calculated values while there is no core (bad start values): NaN, and 0 for the Integer.
 _NO_CORE = tuple((vr, 0 if VARIABLES[vr].type == "Integer" else math.nan)
                  for vr in _BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
+
+
+def guarded(fallback: Callable):
+    """Wrap a slave's FMI entry point so that no exception ever leaves it.
+
+    pythonfmu's and pythonfmu3's binaries turn an exception into the fatal status and then release
+    Python objects they still use, so that a later exception or garbage collection in the process
+    crashes the host. An unexpected exception is therefore logged through the slave's
+    ``_log_fatal`` (the fatal status: the instance must not be used again) and ``fallback(*args)``
+    is returned instead.
+    """
+    def wrap(method):
+        @functools.wraps(method)
+        def entry_point(self, *args):
+            try:
+                return method(self, *args)
+            except Exception as error:  # noqa: BLE001 - an exception must not reach the binary
+                self._log_fatal(f"{method.__name__}: unexpected {type(error).__name__}: {error}")
+                return fallback(*args)
+        return entry_point
+    return wrap
 
 
 def on_nanosecond_grid(t: float) -> float:
@@ -175,6 +197,21 @@ class CoSimulation:
         """The experiment starts at ``start_time`` (s)."""
         self._start_time = float(start_time)
         self._start_values_changed()
+
+    @property
+    def time(self) -> float:
+        """The FMU's time (s): where the core stands, or the start time."""
+        return self._sim.t if self._sim is not None and not self._stale else self._start_time
+
+    def start_at(self, t0: float) -> None:
+        """Start at ``t0`` (s) instead of the start time set, if the core has not moved yet (pythonfmu3
+        does not pass FMI 3.0's start time on: a co-simulation learns it from its first step)."""
+        sim = self._sim
+        if self._stepping and sim is not None and sim.t == self._start_time != t0 and not sim.brackets_opened:
+            self._start_time, self._stepping = float(t0), False
+            self._start_values_changed()
+            self._core()
+            self._stepping = True
 
     def exit_initialization(self) -> None:
         self._core()

@@ -23,24 +23,14 @@ from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variabili
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
 from piezo_fmu.fmi.cosim import CoSimulation
-from piezo_fmu.fmi.variables import KINDS, REFERENCES, VARIABLES, Variable
-
-_CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input,
-              "output": Fmi2Causality.output, "calculatedParameter": Fmi2Causality.calculatedParameter}
-_VARIABILITY = {("parameter", "Real"): Fmi2Variability.fixed,
-                ("parameter", "Integer"): Fmi2Variability.fixed,
-                ("input", "Real"): Fmi2Variability.continuous,
-                ("output", "Real"): Fmi2Variability.continuous,
-                ("output", "Integer"): Fmi2Variability.discrete,
-                ("calculatedParameter", "Real"): Fmi2Variability.fixed}
-
+from piezo_fmu.fmi.variables import KINDS, REFERENCES, VARIABILITY, VARIABLES, Variable
 
 def scalar_variable(spec: Variable, getter: Callable, setter: Optional[Callable] = None):
     """The pythonfmu variable for one row of the table."""
     kind = Integer if spec.type == "Integer" else Real
     initial = Fmi2Initial.exact if spec.causality == "parameter" else None
-    return kind(spec.name, causality=_CAUSALITY[spec.causality],
-                variability=_VARIABILITY[spec.causality, spec.type], initial=initial,
+    return kind(spec.name, causality=Fmi2Causality[spec.causality],
+                variability=Fmi2Variability[VARIABILITY[spec.causality, spec.type]], initial=initial,
                 description=spec.description, getter=getter, setter=setter)
 
 

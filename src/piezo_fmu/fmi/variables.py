@@ -163,3 +163,8 @@ KINDS = tuple(spec.type for spec in VARIABLES)
 REFERENCES = {kind: frozenset(vr for vr, k in enumerate(KINDS) if k == kind) for kind in ("Real", "Integer")}
 #: The value references by name.
 BY_NAME = {spec.name: vr for vr, spec in enumerate(VARIABLES)}
+#: The variability of each (causality, type) of the table, by its FMI name (the same in FMI 2.0
+#: and FMI 3.0).
+VARIABILITY = {("parameter", "Real"): "fixed", ("parameter", "Integer"): "fixed", ("input", "Real"): "continuous",
+               ("output", "Real"): "continuous", ("output", "Integer"): "discrete",
+               ("calculatedParameter", "Real"): "fixed"}
