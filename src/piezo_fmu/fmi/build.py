@@ -19,7 +19,8 @@ written with sorted entries, fixed timestamps and modes, stored uncompressed, wi
 ``__pycache__`` (:mod:`piezo_fmu.fmi.archive`). A rebuild from the same sources is byte-identical,
 which is what ``--check`` relies on.
 
-Each FMU carries the core (the ``piezo_fmu`` package, less the build and the slaves) and its slave
+Each FMU carries the core (the ``piezo_fmu`` package, less the build, the slaves and the interfaces it
+lacks: the FMI 2.0 FMU has no Model Exchange) and its slave
 as a top-level module in ``resources/``. At run time it needs only a Python 3 host with numpy.
 """
 
@@ -39,13 +40,11 @@ import pythonfmu
 import pythonfmu3
 
 from piezo_fmu.fmi import archive, description
-from piezo_fmu.fmi.variables import VARIABLES, Variable
+from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: Files of the package that no FMU needs at run time (each slave travels as its own module).
 NOT_BUNDLED = frozenset({"fmi/build.py", "fmi/fmi2.py", "fmi/fmi3.py", "fmi/archive.py", "fmi/description.py"})
-#: The independent variable FMI 3.0 requires, after the table.
-TIME = Variable("time", "Real", "independent", "s", "Simulation time")
 
 
 @dataclass(frozen=True)
@@ -63,6 +62,8 @@ class Target:
     identity: str
     capabilities: dict
     variables: tuple
+    #: Modules of the package (beyond :data:`NOT_BUNDLED`) that this FMU's interfaces do not use.
+    unused: frozenset = frozenset()
 
     @property
     def dest(self) -> Path:
@@ -84,12 +85,12 @@ def _pythonfmu3(script: Path, project_files: list[Path], outdir: Path, capabilit
 FMI2 = Target(2, "PiezoImpactDamper", "fmi2.py", "piezo_fmu_slave", _pythonfmu, description.complete_fmi2, "guid",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUstate": True,
                "canSerializeFMUstate": True},
-              VARIABLES)
+              VARIABLES, frozenset({"fmi/me.py"}))
 FMI3 = Target(3, "PiezoImpactDamper3", "fmi3.py", "piezo_fmu_slave3", _pythonfmu3, description.complete_fmi3,
               "instantiationToken",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUState": True,
                "canSerializeFMUState": True},
-              VARIABLES + (TIME,))
+              FMI3_VARIABLES)
 TARGETS = {2: FMI2, 3: FMI3}
 #: The FMI 2.0 FMU's file, the one the harness and the hosts use by default.
 DEFAULT_DEST = FMI2.dest
@@ -106,7 +107,7 @@ def stage_sources(workdir: Path, target: Target) -> tuple[Path, list[Path]]:
     package = workdir / "piezo_fmu"
     for source in sorted(PACKAGE_DIR.rglob("*.py")):
         relative = source.relative_to(PACKAGE_DIR)
-        if "__pycache__" in relative.parts or relative.as_posix() in NOT_BUNDLED:
+        if "__pycache__" in relative.parts or relative.as_posix() in NOT_BUNDLED | target.unused:
             continue
         destination = package / relative
         destination.parent.mkdir(parents=True, exist_ok=True)

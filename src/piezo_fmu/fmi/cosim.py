@@ -45,10 +45,21 @@ _RUNS = _runs(_BY_CAUSALITY["output"])
 _UNDEFINED_IS_ZERO = tuple(vr for vr in _BY_CAUSALITY["output"] if VARIABLES[vr].undefined_is_zero)
 _Y, _V = BY_NAME["base_displacement"], BY_NAME["base_velocity"]
 #: The variables whose values do not depend on the core's state: read without updating.
-_SET_BY_HOST = frozenset(_BY_CAUSALITY["parameter"] + _BY_CAUSALITY["input"])
+SET_BY_HOST = frozenset(_BY_CAUSALITY["parameter"] + _BY_CAUSALITY["input"])
 #: Output and calculated values while there is no core (bad start values): NaN, and 0 for the Integer.
 _NO_CORE = tuple((vr, 0 if VARIABLES[vr].type == "Integer" else math.nan)
                  for vr in _BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
+
+
+def publish(now: list, readings) -> None:
+    """Write ``readings`` (values in the order of :data:`piezo_fmu.solver.READINGS`) into the outputs
+    of ``now`` (values by value reference): each output is the reading of its name, 0 where it is
+    undefined (NaN) and the table says so. Every interface serves its outputs through this."""
+    for first, end, begin, stop in _RUNS:
+        now[first:end] = readings[begin:stop]
+    for vr in _UNDEFINED_IS_ZERO:
+        if now[vr] != now[vr]:
+            now[vr] = 0.0
 
 
 def guarded(fallback: Callable):
@@ -113,7 +124,7 @@ class CoSimulation:
 
     def get(self, vrs) -> list:
         """The values of the variables ``vrs`` (value references, already checked for their type)."""
-        if not self._current and not _SET_BY_HOST.issuperset(vrs):
+        if not self._current and not SET_BY_HOST.issuperset(vrs):
             self._update()
         now = self.now
         return [now[vr] for vr in vrs]
@@ -152,12 +163,7 @@ class CoSimulation:
             for vr, value in _NO_CORE:
                 now[vr] = value
         else:
-            values = sim.reading_values()
-            for first, end, begin, stop in _RUNS:
-                now[first:end] = values[begin:stop]
-            for vr in _UNDEFINED_IS_ZERO:
-                if now[vr] != now[vr]:
-                    now[vr] = 0.0
+            publish(now, sim.reading_values())
         self._current = True
 
     # -- life cycle -------------------------------------------------------------------------------
@@ -185,6 +191,16 @@ class CoSimulation:
             else:
                 self._core_built()
         return self._sim
+
+    @property
+    def fault(self) -> Optional[str]:
+        """Why the instance cannot go on (bad start values, a fixed parameter set later), or None."""
+        self._core()
+        return self._fault
+
+    def simulator(self) -> Optional[Simulator]:
+        """The core of the start values set, where it stands (None when they are refused)."""
+        return self._core()
 
     def _core_built(self) -> None:
         """The calculated parameters of a new core, and the longest step it takes."""

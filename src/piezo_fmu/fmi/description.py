@@ -73,9 +73,13 @@ def _unit_definitions(used_units: set) -> ET.Element:
     return unit_definitions
 
 
+#: Capability flags that only the co-simulation interface element has.
+CO_SIMULATION_ONLY = frozenset({"canHandleVariableCommunicationStepSize"})
+
+
 def _common(root: ET.Element, identity: str, capabilities: dict, interfaces: Iterable[str]) -> None:
     """What both versions need: no build time, the build named, the identity left empty, the
-    capability flags set on each interface element."""
+    capability flags set on each interface element that has them."""
     root.attrib.pop("generationDateAndTime", None)  # a timestamp would break reproducibility
     root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmi.build")
     root.set(identity, "")
@@ -83,7 +87,8 @@ def _common(root: ET.Element, identity: str, capabilities: dict, interfaces: Ite
         element = root.find(interface)
         if element is not None:
             for flag, value in capabilities.items():
-                element.set(flag, str(value).lower())
+                if interface == "CoSimulation" or flag not in CO_SIMULATION_ONLY:
+                    element.set(flag, str(value).lower())
 
 
 def _check_names(names: list, by_name: dict) -> None:
@@ -139,7 +144,28 @@ def complete_fmi3(xml: bytes, variables: Iterable[Variable], capabilities: dict)
         root.remove(old)
     last_interface = max(list(root).index(e) for e in root if e.tag in ("ModelExchange", "CoSimulation"))
     root.insert(last_interface + 1, _unit_definitions(used_units))
+    _initial_unknowns_fmi3(root.find("ModelStructure"), elements)
     return root
+
+
+def _initial_unknowns_fmi3(structure: ET.Element, elements: list) -> None:
+    """The InitialUnknowns FMI 3.0 requires, in value-reference order: the outputs and the
+    continuous states and state derivatives whose ``initial`` is not exact, and the calculated
+    parameters. pythonfmu3 leaves out the states that are locals."""
+    by_reference = {element.get("valueReference"): element for element in elements}
+    unknown = set()
+    for derivative in structure.findall("ContinuousStateDerivative"):
+        element = by_reference[derivative.get("valueReference")]
+        unknown.update({element.get("valueReference"), element.get("derivative")})
+    for element in elements:
+        if element.get("causality") in ("output", "calculatedParameter"):
+            unknown.add(element.get("valueReference"))
+    unknown = {vr for vr in unknown if by_reference[vr].get("initial") != "exact"}
+    for old in structure.findall("InitialUnknown"):
+        structure.remove(old)
+    position = len(structure) - len(structure.findall("EventIndicator"))
+    for vr in sorted(unknown, key=int, reverse=True):
+        structure.insert(position, ET.Element("InitialUnknown", {"valueReference": vr}))
 
 
 def xml_bytes(root: ET.Element) -> bytes:

@@ -28,7 +28,7 @@ class Variable(NamedTuple):
 
     name: str
     type: str  # "Real" or "Integer"
-    causality: str  # "parameter", "input", "output" or "calculatedParameter"
+    causality: str  # "parameter", "input", "output", "calculatedParameter" (FMI 3.0 also "independent", "local")
     unit: Optional[str]  # None for Integer variables: FMI 2.0 gives Integer no unit
     description: str
     min: Optional[float] = None
@@ -157,6 +157,71 @@ VARIABLES = _parameter_variables() + INPUTS + _FIRST_OUTPUTS + CALCULATED + _LAT
 #: Every output, in value-reference order.
 OUTPUTS = tuple(spec for spec in VARIABLES if spec.causality == "output")
 
+#: The independent variable FMI 3.0 requires, after the table.
+TIME = Variable("time", "Real", "independent", "s", "Simulation time")
+
+#: Model Exchange (FMI 3.0; :mod:`piezo_fmu.fmi.me`): the continuous states, in order. The
+#: displacements and velocities and the harvested energies are outputs of the table (the output is
+#: the state, as ``h`` and ``v`` in the FMI reference model BouncingBall); the circuit voltages and
+#: the other quadratures of the energy ledger are locals below.
+STATES = ("main_displacement", "main_velocity", "impactor_displacement", "impactor_velocity",
+          "circuit_voltage_left", "circuit_voltage_right", "energy_dissipated_C", "energy_dissipated_Ceq",
+          "energy_work_base", "harvested_energy_left", "harvested_energy_right", "energy_converted")
+#: The event indicators, in order; ``main_velocity`` (its falling zeros are the maxima of p) is an output.
+INDICATORS = ("gap_right", "gap_left", "deflection_rate", "main_velocity", "voltage_rate")
+#: The unit of the derivative of a state of each unit.
+_RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "V": "V/s", "J": "W"}
+
+_STATE_LOCALS = (
+    Variable("circuit_voltage_left", "Real", "local", "V",
+             "Voltage across the left barrier's load as a continuous state (voltage_model 1 and 2; "
+             "0 under voltage_model 0, whose voltage_left is k_V times the deflection)"),
+    Variable("circuit_voltage_right", "Real", "local", "V",
+             "Voltage across the right barrier's load as a continuous state (voltage_model 1 and 2; "
+             "0 under voltage_model 0, whose voltage_right is k_V times the deflection)"),
+    Variable("energy_dissipated_C", "Real", "local", "J",
+             "Energy dissipated in the main damper C since the start, integral of C (p' - v_b)^2 dt", min=0.0),
+    Variable("energy_dissipated_Ceq", "Real", "local", "J",
+             "Energy dissipated in the contact damping C_eq since the start, integral of C_eq delta'^2 dt", min=0.0),
+    Variable("energy_work_base", "Real", "local", "J",
+             "Work done by the base on the device since the start, -integral of v_b (K (p - y) + C (p' - v_b)) dt"),
+    Variable("energy_converted", "Real", "local", "J",
+             "Energy the barriers fed their circuits since the start, integral of chi V delta' dt "
+             "(voltage_model 1 and 2; 0 under 0)"),
+)
+_INDICATOR_LOCALS = (
+    Variable("gap_right", "Real", "local", "m",
+             "Event indicator q - p - d/2: negative in free flight, the right barrier's deflection in contact "
+             "with it; its rising zero is a contact onset, its falling zero a separation"),
+    Variable("gap_left", "Real", "local", "m",
+             "Event indicator p - q - d/2: negative in free flight, the left barrier's deflection in contact "
+             "with it; its rising zero is a contact onset, its falling zero a separation"),
+    Variable("deflection_rate", "Real", "local", "m/s",
+             "Event indicator: the deflection rate delta' of the barrier in contact, whose falling zero is the "
+             "peak deflection (V_i under voltage_model 0); 1 in free flight"),
+    Variable("voltage_rate", "Real", "local", "V/s",
+             "Event indicator: dV/dt of the barrier in contact under voltage_model 1 and 2, whose zeros are "
+             "the candidates for the peak |V| (V_i); 1 in free flight and under voltage_model 0"),
+)
+
+
+def _derivative_rows() -> tuple:
+    units = {spec.name: spec.unit for spec in VARIABLES + _STATE_LOCALS}
+    return tuple(Variable(f"der({name})", "Real", "local", _RATE_UNITS[units[name]], f"Time derivative of {name}")
+                 for name in STATES)
+
+
+#: The variables only Model Exchange needs (FMI 3.0 locals, after ``time``): the states that are not
+#: outputs, the state derivatives ``der(x)``, the event indicators that are not outputs, and the
+#: discrete state (the phase).
+MODEL_EXCHANGE = _STATE_LOCALS + _derivative_rows() + _INDICATOR_LOCALS + (
+    Variable("contact_phase", "Integer", "local", None,
+             "Discrete state: 0 in free flight, +1 in contact with the right barrier, -1 with the left one",
+             min=-1, max=1),
+)
+#: The FMI 3.0 FMU's variables in value-reference order: the table, ``time``, the Model Exchange locals.
+FMI3_VARIABLES = VARIABLES + (TIME,) + MODEL_EXCHANGE
+
 #: The FMI 2.0 type of each variable, by value reference ("Real" or "Integer").
 KINDS = tuple(spec.type for spec in VARIABLES)
 #: The value references of each FMI 2.0 type.
@@ -167,4 +232,5 @@ BY_NAME = {spec.name: vr for vr, spec in enumerate(VARIABLES)}
 #: and FMI 3.0).
 VARIABILITY = {("parameter", "Real"): "fixed", ("parameter", "Integer"): "fixed", ("input", "Real"): "continuous",
                ("output", "Real"): "continuous", ("output", "Integer"): "discrete",
-               ("calculatedParameter", "Real"): "fixed"}
+               ("calculatedParameter", "Real"): "fixed", ("independent", "Real"): "continuous",
+               ("local", "Real"): "continuous", ("local", "Integer"): "discrete"}

@@ -1,0 +1,295 @@
+"""One Model Exchange run of the damper (:mod:`piezo_fmu.fmi.me`): the model's equations on its
+state, and its event update.
+
+:class:`Equations` are the right-hand side, the event indicators and the nominal sizes of the
+states, from the model (:class:`piezo_fmu.model.Damper`) of one parameter set. :class:`Run` is the
+state of one run (continuous states, phase, discrete bookkeeping) with its event update, which
+applies the model's switch rules and records the events in the solver's metric accumulators,
+and the readings a host gets from it.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from typing import Optional
+
+from piezo_fmu.fmi.variables import INDICATORS, STATES
+from piezo_fmu.model.damper import FREE, LEFT, RIGHT, Damper
+from piezo_fmu.model.dynamics import DU, DW, approach_sign
+from piezo_fmu.model.voltage import QUASI_STATIC, circuit_rate, quasi_static
+from piezo_fmu.solver import EnergyLedger
+from piezo_fmu.solver.metrics import MetricAccumulators
+
+#: Indices of the continuous states (:data:`piezo_fmu.fmi.variables.STATES`).
+P, DP, Q, DQ, V_LEFT, V_RIGHT, D_C, D_CEQ, W_BASE, H_LEFT, H_RIGHT, CONVERTED = range(len(STATES))
+#: A deflection within this fraction of the gap of zero is on the barrier's surface: a host's event
+#: location lands well within it (CVode's, 1e-13 s, moves a body at 1 m/s by 1e-13 m).
+SURFACE = 1e-9
+#: A relative velocity under this many ulp of the velocities is zero (the solver's rounding level).
+NOISE = 64 * 2.0**-52
+#: Switches allowed at one instant before the run is declared degenerate (as in the solver).
+MAX_SWITCHES_AT_ONE_INSTANT = 8
+#: The value of an indicator in a phase that does not use it.
+UNUSED = 1.0
+
+
+def _dot(row, xs) -> float:
+    return sum(map(operator.mul, row, xs))
+
+
+class Equations:
+    """The damper's equations on the Model Exchange state, derived once from its model: the rows of
+    the phase matrices that give ``p''`` and ``q''``, the energy rates, and the circuit constants."""
+
+    def __init__(self, damper: Damper):
+        self.damper = damper
+        self.params = params = damper.params
+        self.rows = {side: (A[DU].tolist(), A[DW].tolist())
+                     for side, A in ((side, damper.matrix(side)) for side in (FREE, RIGHT, LEFT))}
+        self.rates = {side: damper.rates(side).T.tolist() for side in (FREE, RIGHT, LEFT)}
+        self.circuit = params.voltage_model != QUASI_STATIC
+        barrier = damper.barrier
+        self.chi, self.C_p, self.R, self.k_V = barrier.chi, barrier.C_p, params.R_load, barrier.k_V
+
+    def deviation(self, x: list, side: int, y: float, v: float) -> list:
+        """The model's deviation state ``(p - y, q - y, p' - v, q' - v, 1[, V])`` of phase ``side``."""
+        xs = [x[P] - y, x[Q] - y, x[DP] - v, x[DQ] - v, 1.0]
+        if side != FREE and self.damper.coupled:
+            xs.append(x[V_RIGHT if side == RIGHT else V_LEFT])
+        return xs
+
+    def acceleration(self, x: list, side: int, y: float, v: float) -> float:
+        """``p''`` (m/s^2)."""
+        return _dot(self.rows[side][0], self.deviation(x, side, y, v))
+
+    def deflection_rate(self, x: list, side: int) -> float:
+        """``delta' = s (q' - p')`` (m/s) of the barrier on ``side``."""
+        return side * (x[DQ] - x[DP])
+
+    def derivatives(self, x: list, side: int, y: float, v: float) -> list:
+        """The time derivatives of the states (:data:`~piezo_fmu.fmi.variables.STATES`), SI."""
+        xs = self.deviation(x, side, y, v)
+        du_row, dw_row = self.rows[side]
+        u_rate, relative_rate, force = (_dot(rate, xs) for rate in self.rates[side])
+        params = self.params
+        dx = [x[DP], _dot(du_row, xs), x[DQ], _dot(dw_row, xs), 0.0, 0.0, params.C * u_rate * u_rate,
+              params.C_eq * relative_rate * relative_rate, -v * force, 0.0, 0.0, 0.0]
+        if self.circuit:
+            rate = self.deflection_rate(x, side) if side != FREE else 0.0
+            v_left, v_right = x[V_LEFT], x[V_RIGHT]
+            dx[V_LEFT] = circuit_rate(v_left, rate if side == LEFT else 0.0, self.chi, self.C_p, self.R)
+            dx[V_RIGHT] = circuit_rate(v_right, rate if side == RIGHT else 0.0, self.chi, self.C_p, self.R)
+            dx[H_LEFT], dx[H_RIGHT] = v_left * v_left / self.R, v_right * v_right / self.R
+            if side != FREE:
+                dx[CONVERTED] = self.chi * (v_right if side == RIGHT else v_left) * rate
+        return dx
+
+    def indicators(self, x: list, side: int) -> list:
+        """The event indicators (:data:`~piezo_fmu.fmi.variables.INDICATORS`)."""
+        damper = self.damper
+        z = [damper.deflection(RIGHT, x[P], x[Q]), damper.deflection(LEFT, x[P], x[Q]), UNUSED, x[DP], UNUSED]
+        if side != FREE:
+            z[2] = rate = self.deflection_rate(x, side)
+            if self.circuit:
+                z[4] = circuit_rate(x[V_RIGHT if side == RIGHT else V_LEFT], rate, self.chi, self.C_p, self.R)
+        return z
+
+    def nominals(self) -> list:
+        """Nominal sizes of the states: half the gap, the velocity of the main mass's free motion over
+        it, the voltage that velocity drives into the load at the contact frequency, the energy of
+        the main spring stretched by half the gap."""
+        params = self.params
+        length = params.d / 2
+        speed = length * math.sqrt(params.K / params.M)
+        volt = 1.0
+        if self.circuit:
+            volt = self.chi * speed * self.R / (1.0 + self.damper.contact_frequency * self.R * self.C_p)
+        energy = 0.5 * params.K * length * length
+        return [length, speed, length, speed, volt, volt] + [energy] * 6
+
+
+class Run:
+    """The Model Exchange state of one run: continuous states ``x`` (:data:`STATES` order), phase,
+    and the discrete bookkeeping; with the event update and the readings."""
+
+    def __init__(self, equations: Equations, t0: float, y0: float, v0: float):
+        self.eq = equations
+        params = equations.params
+        self.t = t0
+        self.x = [params.p0, params.dp0, params.q0, params.dq0] + [0.0] * 8
+        self.side = FREE
+        self.plastic = 0.0
+        self.initial = sum(equations.damper.mechanical_energy(FREE, params.p0, params.dp0, params.q0, params.dq0, y0))
+        self.acc = MetricAccumulators()
+        self.peak_deflection = self.peak_voltage = 0.0
+        self.rising = self._rising(y0, v0)  # a zero of p' at the start is no maximum
+
+    # -- the event update -------------------------------------------------------------------------
+
+    def update(self, y: float, v: float) -> bool:
+        """Apply every switch due at the present instant with the base at ``y`` (m), ``v`` (m/s),
+        and record the events; True when the continuous states jumped."""
+        self._record_peaks()
+        jumped = False
+        for _ in range(MAX_SWITCHES_AT_ONE_INSTANT + 1):
+            to = self._switch_due(y, v)
+            if to is None:
+                break
+            self._switch(to)
+            jumped = True
+        else:
+            raise RuntimeError(f"{MAX_SWITCHES_AT_ONE_INSTANT} phase switches at t = {self.t!r} s without progress")
+        self._record_peaks()
+        rising = self._rising(y, v)
+        if self.rising and not rising:  # p' fell through 0: a maximum of p
+            self.acc.maximum(self.t, self.x[P])
+        self.rising = rising
+        return jumped
+
+    def _approach(self, side: int, y: float, v: float) -> int:
+        """The sign of the relative velocity towards the barrier on ``side``; where it is zero to
+        rounding, that of the relative acceleration without the barrier's force."""
+        x = self.x
+        rate = side * (x[DQ] - x[DP])
+        if abs(rate) > NOISE * (abs(x[DQ]) + abs(x[DP])):
+            return 1 if rate > 0.0 else -1
+        return approach_sign(self.eq.params.K, self.eq.params.C, x[P] - y, x[DP] - v, side)
+
+    def _switch_due(self, y: float, v: float) -> Optional[int]:
+        """The phase to switch to now, or None (docs/model.md sections 3.6-3.7)."""
+        x, damper = self.x, self.eq.damper
+        tol = SURFACE * damper.params.d
+        if self.side == FREE:
+            for side in (RIGHT, LEFT):
+                gap = damper.deflection(side, x[P], x[Q])
+                if gap > tol or (gap >= -tol and self._approach(side, y, v) > 0):
+                    return side
+            return None
+        delta = damper.deflection(self.side, x[P], x[Q])
+        if delta < -tol or (delta <= tol and self._approach(self.side, y, v) < 0):
+            return FREE
+        return None
+
+    def _switch(self, to: int) -> None:
+        """The momentum-exact switch rules of the model, as jumps of the state."""
+        x, damper = self.x, self.eq.damper
+        dp, dq = x[DP], x[DQ]
+        if to != FREE:
+            x[DQ], loss = damper.capture(dp, dq)
+            self.acc.impact_started()
+            self.side = to
+            self._snap(to, inside=True)
+            self.peak_deflection = 0.0
+            self.peak_voltage = abs(self._voltage(to))
+        else:
+            side = self.side
+            x[DP], loss = damper.release(dp, dq)
+            if self.eq.circuit:
+                voltage = max(self.peak_voltage, abs(self._voltage(side)))  # ends included
+            else:
+                voltage = quasi_static(self.eq.k_V, self.peak_deflection)
+            self.acc.impact_ended(voltage)
+            if dp > 0.0 >= x[DP]:  # p' jumps from rising to falling: a corner maximum of p
+                self.acc.maximum(self.t, x[P])
+                self.rising = False
+            self.side = FREE
+            self._snap(side, inside=False)
+        self.plastic += loss
+
+    def _snap(self, side: int, inside: bool) -> None:
+        """Put the impact mass on the surface of the barrier on ``side``, one rounding inside it
+        (``inside``) or outside, if the event left it within :data:`SURFACE` of it."""
+        x, damper = self.x, self.eq.damper
+        p, d = x[P], damper.params.d
+        if abs(damper.deflection(side, p, x[Q])) > SURFACE * d:
+            return
+        q = p + side * (d / 2)
+        towards = side * math.inf if inside else -side * math.inf
+        for _ in range(64):
+            delta = damper.deflection(side, p, q)
+            if (delta > 0.0) if inside else (delta < 0.0):
+                break
+            q = math.nextafter(q, towards)
+        x[Q] = q
+
+    def _record_peaks(self) -> None:
+        """The open contact's largest deflection and ``|V|`` so far: its events are updates."""
+        if self.side != FREE:
+            x = self.x
+            self.peak_deflection = max(self.peak_deflection, self.eq.damper.deflection(self.side, x[P], x[Q]))
+            if self.eq.circuit:
+                self.peak_voltage = max(self.peak_voltage, abs(self._voltage(self.side)))
+
+    def _rising(self, y: float, v: float) -> bool:
+        dp = self.x[DP]
+        if dp != 0.0:
+            return dp > 0.0
+        return self.eq.acceleration(self.x, self.side, y, v) > 0.0
+
+    def _voltage(self, side: int) -> float:
+        return self.x[V_RIGHT if side == RIGHT else V_LEFT]
+
+    # -- what a host reads ------------------------------------------------------------------------
+
+    def readings(self, y: float, v: float) -> tuple:
+        """The readings of :data:`piezo_fmu.solver.READINGS`, in its order, at the present state."""
+        x, eq, side = self.x, self.eq, self.side
+        damper, params = eq.damper, eq.params
+        p, dp, q, dq = x[P], x[DP], x[Q], x[DQ]
+        deflection = max(0.0, damper.deflection(side, p, q)) if side != FREE else 0.0
+        left, right = (deflection, 0.0) if side == LEFT else (0.0, deflection)
+        kinetic, potential_K, potential_Keq = damper.mechanical_energy(side, p, dp, q, dq, y)
+        flows = (x[D_C], x[D_CEQ], self.plastic, x[W_BASE], self.initial)
+        if eq.circuit:
+            v_left, v_right = x[V_LEFT], x[V_RIGHT]
+            power_left, power_right = v_left * v_left / eq.R, v_right * v_right / eq.R
+            energy = EnergyLedger(kinetic, potential_K, potential_Keq, *flows,
+                                  electrical=0.5 * eq.C_p * (v_left * v_left + v_right * v_right),
+                                  harvested_left=x[H_LEFT], harvested_right=x[H_RIGHT], converted=x[CONVERTED],
+                                  electrical_work=x[CONVERTED] if damper.coupled else 0.0)
+        else:
+            v_left, v_right = quasi_static(eq.k_V, left), quasi_static(eq.k_V, right)
+            power_left = power_right = 0.0
+            energy = EnergyLedger(kinetic, potential_K, potential_Keq, *flows)
+        metrics = self.acc.metrics(params.R_load)
+        return (p, dp, q, dq, left, right, v_left, v_right, params.K * (p - y) + params.C * (dp - v),
+                metrics.impact_count, metrics.last_impact_voltage, metrics.V_rms, metrics.P_ave, metrics.DI,
+                energy.dissipated, energy.balance_error, energy.harvested, power_left, power_right,
+                energy.harvested_left, energy.harvested_right, metrics.DI_ls)
+
+    def locals(self, y: float, v: float) -> dict:
+        """The Model Exchange locals (:data:`~piezo_fmu.fmi.variables.MODEL_EXCHANGE`) by name."""
+        values = dict(zip(STATES, self.x))
+        values.update(zip((f"der({name})" for name in STATES), self.eq.derivatives(self.x, self.side, y, v)))
+        values.update(zip(INDICATORS, self.eq.indicators(self.x, self.side)))
+        values["contact_phase"] = self.side
+        return values
+
+    # -- saving the state -------------------------------------------------------------------------
+
+    def snapshot(self) -> dict:
+        """The whole state, JSON-safe."""
+        return {"t": self.t, "x": list(self.x), "side": self.side, "plastic": self.plastic, "initial": self.initial,
+                "acc": self.acc.to_dict(), "peak_deflection": self.peak_deflection,
+                "peak_voltage": self.peak_voltage, "rising": self.rising}
+
+    def restore(self, data: dict) -> None:
+        self.t, self.x, self.side = float(data["t"]), [float(value) for value in data["x"]], int(data["side"])
+        self.plastic, self.initial = float(data["plastic"]), float(data["initial"])
+        self.acc = MetricAccumulators.from_dict(data["acc"])
+        self.peak_deflection, self.peak_voltage = float(data["peak_deflection"]), float(data["peak_voltage"])
+        self.rising = bool(data["rising"])
+
+    @classmethod
+    def of_core(cls, sim) -> "Run":
+        """The Model Exchange state of the co-simulation core ``sim`` now (its locals for a host
+        that reads them in co-simulation)."""
+        run = cls(Equations(sim.damper), sim.t, sim.state.y, sim.state.v)
+        state, energy = sim.state, sim.energy
+        run.x = [state.p, state.dp, state.q, state.dq,
+                 sim.voltage(LEFT) if run.eq.circuit else 0.0, sim.voltage(RIGHT) if run.eq.circuit else 0.0,
+                 energy.dissipated_C, energy.dissipated_Ceq, energy.work_base, energy.harvested_left,
+                 energy.harvested_right, energy.converted]
+        run.side = state.side
+        return run
