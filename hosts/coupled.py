@@ -177,25 +177,32 @@ def run_ssp_ecos(step: float = STEP_SIZE, stop: float = STOP_TIME, damper: Path 
 
 # -- the energy ledger ----------------------------------------------------------------------------
 
-def damper_energy(run: Run) -> np.ndarray:
-    """The damper's stored energy at every sample, rebuilt from its outputs (see module doc)."""
+def stored_energy(damper: dict, base: np.ndarray) -> np.ndarray:
+    """The damper's stored energy (J) at every sample of its outputs ``damper`` (by name), its base
+    at ``base`` (m): kinetic with the masses of each phase, plus ``K (p - y)^2/2 + K_eq delta^2/2``."""
     from piezo_fmu import Parameters
     from piezo_fmu.model.barrier import derive_barrier
 
     params = Parameters(**DAMPER_START)
     barrier = derive_barrier(params)
-    d, s = run.damper, run.structure
+    d = damper
     in_contact = (d["deflection_left"] > 0.0) | (d["deflection_right"] > 0.0)
     m_main = np.where(in_contact, params.M - barrier.M_eq, params.M)
     m_impact = np.where(in_contact, params.m + barrier.M_eq, params.m)
     kinetic = 0.5 * (m_main * d["main_velocity"] ** 2 + m_impact * d["impactor_velocity"] ** 2)
+    deflection = d["deflection_left"] + d["deflection_right"]
+    potential = 0.5 * params.K * (d["main_displacement"] - base) ** 2 + 0.5 * barrier.K_eq * deflection**2
+    return kinetic + potential
+
+
+def damper_energy(run: Run) -> np.ndarray:
+    """The damper's stored energy at every sample, rebuilt from its outputs (see module doc)."""
+    s = run.structure
     # The damper's base at the end of step k is on its ramp: X_k + V_k h (not yet X_{k+1}).
     base = np.empty_like(run.time)
     base[0] = s["displacement"][0]
     base[1:] = s["displacement"][:-1] + s["velocity"][:-1] * np.diff(run.time)
-    deflection = d["deflection_left"] + d["deflection_right"]
-    potential = 0.5 * params.K * (d["main_displacement"] - base) ** 2 + 0.5 * barrier.K_eq * deflection**2
-    return kinetic + potential
+    return stored_energy(run.damper, base)
 
 
 @dataclass
