@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep clean
+.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -63,6 +63,9 @@ bench-fmu: $(STAMP)
 
 bench-sweep: $(STAMP)
 	$(BIN)/python benchmarks/bench_sweep.py
+
+bench-me: $(STAMP)
+	$(BIN)/python benchmarks/bench_me.py
 
 clean:
 	rm -rf $(VENV) results build
