@@ -5,9 +5,12 @@
   on), a rebuild is reproducible, and the FMU's identity (FMI 2.0 ``guid``, FMI 3.0
   ``instantiationToken``) is derived from its content.
 - ``--check`` fails on a stale FMU and names the entry that changed.
-- Each FMU bundles the core and its own slave, and no build tooling.
+- Each FMU bundles the core and its own slave, and no build tooling (nor, in the FMI 2.0 FMU, the
+  Model Exchange modules it cannot use).
 - The FMI 3.0 FMU declares the FMI 2.0 one's variables under the same value references, names,
-  units, bounds, start values and descriptions (Real as Float64, Integer as Int32), plus ``time``.
+  units, bounds, start values and descriptions (Real as Float64, Integer as Int32), plus ``time``,
+  and the Model Exchange interface: its states, derivatives and indicators, each with a unit and a
+  description.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from piezo_fmu.fmi import archive, build
+from piezo_fmu.fmi import archive, build, variables
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = [build.FMI2, build.FMI3]
@@ -86,7 +89,9 @@ def test_fmu_bundles_the_core_and_its_slave_but_no_build_tooling(target):
     for module in ("__init__", "model/parameters", "model/barrier", "solver/simulator", "fmi/variables", "fmi/cosim"):
         assert f"resources/piezo_fmu/{module}.py" in names
     assert f"resources/{target.slave_module}.py" in names
-    assert not {f"resources/piezo_fmu/{tool}" for tool in build.NOT_BUNDLED} & names
+    assert not {f"resources/piezo_fmu/{tool}" for tool in build.NOT_BUNDLED | target.unused} & names
+    if target.fmi_version == 3:
+        assert {"resources/piezo_fmu/fmi/me.py", "resources/piezo_fmu/fmi/me_run.py"} <= names
     assert f"{target.linux_binaries}{target.model_identifier}.so" in names
 
 
@@ -103,3 +108,16 @@ def test_fmi3_declares_the_fmi2_variables_under_the_same_references_and_attribut
     assert (time.name, time.unit) == ("time", "s")
     assert three.modelName == two.modelName == "PiezoImpactDamper"
     assert three.coSimulation.canGetAndSetFMUstate and three.coSimulation.canSerializeFMUstate
+
+
+def test_fmi3_declares_model_exchange_with_its_states_and_indicators_each_with_a_unit_and_a_description():
+    three = read_model_description(str(ROOT / build.FMI3.dest))
+    assert three.modelExchange.modelIdentifier == three.coSimulation.modelIdentifier == build.FMI3.model_identifier
+    assert three.coSimulation.canHandleVariableCommunicationStepSize
+    assert [d.variable.derivative.name for d in three.derivatives] == list(variables.STATES)
+    assert [d.variable.name for d in three.derivatives] == [f"der({name})" for name in variables.STATES]
+    assert [z.variable.name for z in three.eventIndicators] == list(variables.INDICATORS)
+    assert (three.numberOfContinuousStates, three.numberOfEventIndicators) == (12, 5)
+    for v in three.modelVariables:
+        assert v.description, v.name
+        assert v.type != "Float64" or v.unit, v.name

@@ -85,7 +85,7 @@ def _pythonfmu3(script: Path, project_files: list[Path], outdir: Path, capabilit
 FMI2 = Target(2, "PiezoImpactDamper", "fmi2.py", "piezo_fmu_slave", _pythonfmu, description.complete_fmi2, "guid",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUstate": True,
                "canSerializeFMUstate": True},
-              VARIABLES, frozenset({"fmi/me.py"}))
+              VARIABLES, frozenset({"fmi/me.py", "fmi/me_run.py"}))
 FMI3 = Target(3, "PiezoImpactDamper3", "fmi3.py", "piezo_fmu_slave3", _pythonfmu3, description.complete_fmi3,
               "instantiationToken",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUState": True,

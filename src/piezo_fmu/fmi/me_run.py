@@ -151,7 +151,7 @@ class Run:
         """The sign of the relative velocity towards the barrier on ``side``; where it is zero to
         rounding, that of the relative acceleration without the barrier's force."""
         x = self.x
-        rate = side * (x[DQ] - x[DP])
+        rate = self.eq.deflection_rate(x, side)
         if abs(rate) > NOISE * (abs(x[DQ]) + abs(x[DP])):
             return 1 if rate > 0.0 else -1
         return approach_sign(self.eq.params.K, self.eq.params.C, x[P] - y, x[DP] - v, side)
