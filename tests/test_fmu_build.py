@@ -121,3 +121,13 @@ def test_fmi3_declares_model_exchange_with_its_states_and_indicators_each_with_a
     for v in three.modelVariables:
         assert v.description, v.name
         assert v.type != "Float64" or v.unit, v.name
+
+
+@pytest.mark.parametrize("target", TARGETS, ids=IDS)
+def test_the_fmu_carries_the_package_version(target):
+    from importlib.metadata import version
+
+    import piezo_fmu
+
+    md = read_model_description(str(ROOT / target.dest))
+    assert md.version == piezo_fmu.__version__ == version("piezo-fmu")

@@ -140,11 +140,11 @@ def freeze(raw_fmu: Path, target: Target) -> bytes:
     return archive.deterministic_zip(files)
 
 
-def build_bytes(target: Target = FMI2, script: Optional[Path] = None) -> bytes:
+def build_bytes(target: Target = FMI2, script: Optional[Path] = None, modules: tuple[Path, ...] = ()) -> bytes:
     """Build one FMU in a scratch directory and return its bytes.
 
     ``script`` defaults to the target's slave. Another slave script (the benchmark's no-work slave)
-    gets the same bundle, with the target's slave beside it as a module it can import.
+    gets the same bundle, with the target's slave and ``modules`` beside it as modules it can import.
     """
     with tempfile.TemporaryDirectory(prefix="piezo_fmu_build_") as scratch:
         scratch = Path(scratch)
@@ -154,6 +154,9 @@ def build_bytes(target: Target = FMI2, script: Optional[Path] = None) -> bytes:
         slave, project_files = stage_sources(stage, target)
         if script is not None:
             project_files.append(slave)
+            for module in modules:
+                shutil.copyfile(module, stage / Path(module).name)
+                project_files.append(stage / Path(module).name)
             slave = stage / Path(script).name
             shutil.copyfile(script, slave)
         return freeze(run_builder(target, slave, project_files, out), target)
