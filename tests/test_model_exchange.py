@@ -11,8 +11,9 @@ momentum-exact, its ledger closes, its state is saved, it never crashes the host
   move beyond the snap onto the barrier's surface.
 - The energy ledger closes to the solver's tolerance under voltage models 0 and 1.
 - The full state (continuous, discrete, metrics) is saved and restored, also serialized.
-- An instance is co-simulation or Model Exchange by its first call that only one interface makes;
-  fmpy's co-simulation event mode (which calls ``update_discrete_states``) leaves it co-simulation.
+- An instance is co-simulation or Model Exchange by its first call that only one interface makes,
+  and refuses the other's calls; fmpy's co-simulation event mode (which calls
+  ``update_discrete_states``) leaves it co-simulation.
 - Bad start values, and a fixed parameter set later, are logged with their range and stop the run
   at the next event update; nothing crashes.
 - The monolithic host (``hosts/monolithic.py``): the floor and the damper in one ``solve_ivp``, its
@@ -213,6 +214,24 @@ def test_fmpy_co_simulation_in_event_mode_stays_co_simulation():
     event_mode = simulate_fmu(str(FMU3), fmi_type="CoSimulation", stop_time=0.2, output_interval=1e-3,
                               use_event_mode=True)
     assert plain["impact_count"][-1] > 0 and np.array_equal(plain, event_mode)
+
+
+@pytest.mark.parametrize("first, other", [("model exchange", "co-simulation"), ("co-simulation", "model exchange")])
+def test_the_first_call_of_one_interface_decides_and_the_other_is_refused(first, other):
+    from pythonfmu3 import Fmi3Status
+
+    from piezo_fmu.fmi.fmi3 import PiezoImpactDamper3  # the slave in-process: its calls are plain methods
+
+    slave = PiezoImpactDamper3(instance_name="decided")
+    slave.exit_initialization_mode()
+    calls = {"model exchange": lambda: slave.set_time(1e-3), "co-simulation": lambda: slave.do_step(0.0, 1e-3)}
+    results = [calls[first](), calls[other]()]
+    assert [getattr(result, "status", None) for result in results] == (
+        [None, Fmi3Status.error] if first == "model exchange" else [Fmi3Status.ok, None])
+    assert [m.msg for m in slave.log_queue] == [f"this instance runs as {first}: a {other} call is not allowed"]
+    # The event update: nothing is due at the start in Model Exchange, nothing ever in co-simulation.
+    update = slave.update_discrete_states()
+    assert (update.discreteStatesNeedUpdate, update.terminateSimulation) == (False, False)
 
 
 @pytest.mark.parametrize("values, words", [({"m": -1.0}, "m = -1.0 kg is out of range; allowed range (0, inf)"),
