@@ -121,6 +121,7 @@ def simulate(stop: float = coupled.STOP_TIME, rtol: float = 1e-10, grid: float =
     damper = DamperME()
     u0, v0, _ = ground(0.0)
     state = np.concatenate([[u0, v0, 0.0, 0.0], damper.states()])  # X, X', W_ground, D_s, damper
+    # Absolute tolerances from the sizes of the floor's states (mm, cm/s, 10 mJ) and the FMU's nominals.
     atol = rtol * np.concatenate([[1e-3, 1e-2, 1e-2, 1e-2], damper.nominals])
 
     def rhs(t, s):
@@ -140,7 +141,7 @@ def simulate(stop: float = coupled.STOP_TIME, rtol: float = 1e-10, grid: float =
         event.terminal = True
     t, rows, n_events, started = 0.0, [], 0, time.process_time()
     while t < stop:
-        before = indicators(t, state) > 0.0
+        start = indicators(t, state)
         sol = solve_ivp(rhs, (t, stop), state, method="DOP853", rtol=rtol, atol=atol, events=events, dense_output=True)
         end = sol.t[-1]
         for tk in np.arange(np.ceil(t / grid - 1e-9), np.floor(end / grid + 1e-9) + 1) * grid:
@@ -151,7 +152,7 @@ def simulate(stop: float = coupled.STOP_TIME, rtol: float = 1e-10, grid: float =
         if sol.status != 1:
             break
         fired = min((times[0], i) for i, times in enumerate(sol.t_events) if len(times))[1]
-        t, state = _past_crossing(sol, end, lambda tt, ss: indicators(tt, ss)[fired], before[fired])
+        t, state = _past_crossing(sol, end, lambda tt, ss: indicators(tt, ss)[fired], start[fired])
         damper.load(t, state[0], state[1], state[4:])
         state[4:] = damper.event()
         n_events += 1
@@ -168,17 +169,19 @@ def simulate(stop: float = coupled.STOP_TIME, rtol: float = 1e-10, grid: float =
     return data
 
 
-def _past_crossing(sol, t: float, indicator, before: bool) -> tuple[float, np.ndarray]:
-    """The first instant from ``t`` on (the root solve_ivp found) where ``indicator`` has left the
-    sign it had before, and the state there: the FMU then sees the crossing it is asked about, and
-    the restart does not find it again."""
-    step = np.spacing(t)
-    while True:
+def _past_crossing(sol, t: float, indicator, start: float) -> tuple[float, np.ndarray]:
+    """The first instant from ``t`` on (the root solve_ivp found) where ``indicator`` is non-zero and
+    has left the sign of its value ``start`` at the segment's start (any sign, if that was 0: solve_ivp
+    takes a zero there for a crossing), and the state there: the FMU then sees the crossing it is
+    asked about, and the restart does not find it again."""
+    step = np.spacing(max(abs(t), 1.0))
+    for _ in range(64):  # the root is within a few ulps of the crossing
         state = sol.sol(t)
         z = indicator(t, state)
-        if z != 0.0 and (z > 0.0) != before:
+        if z != 0.0 and (start == 0.0 or (z > 0.0) != (start > 0.0)):
             return t, state
         t, step = t + step, 2.0 * step
+    raise RuntimeError(f"no sign change of the event indicator after t = {t!r} s")
 
 
 def compare_with_cosimulation(mono: dict, steps=STEPS, stop: float = coupled.STOP_TIME, horizon: float = 1.0) -> list[dict]:
