@@ -1,0 +1,1 @@
+"""The FMI layer: what makes the core an FMU."""
