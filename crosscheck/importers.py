@@ -16,7 +16,8 @@ communication points:
 - ``ecos``: ecos through ``ecospy``; it adds the step to its time at every step
   (``t_{k+1} = t_k + 0.001`` in floating point) and passes ``(t_k, 0.001)`` to ``fmi2DoStep``.
   The inputs are set through ``set_real`` before each step;
-- ``native``: the project's C host (``hosts/native_host.c``) under its launcher.
+- ``native``: the project's C host (``hosts/native_host.c``) in a bare environment (its PATH
+  holding this Python; the FMU's loader finds it).
 
 Each returns a :class:`Result` with the output time series and, where the driver knows them,
 the ``(t_k, h_k)`` it passed to ``fmi2DoStep``.
@@ -315,7 +316,7 @@ def run_ecos(fmu: Path = scenario.FMU_PATH) -> Result:
 # -- the C host -----------------------------------------------------------------------------------
 
 def run_native(fmu: Path = scenario.FMU_PATH) -> Result:
-    """The project's C host, under ``hosts/run_native_host.sh``, on the cross-check input."""
+    """The project's C host, in a bare environment, on the cross-check input."""
     from hosts import native
 
     with tempfile.TemporaryDirectory(prefix="piezo_native_") as scratch:

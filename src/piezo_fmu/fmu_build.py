@@ -13,13 +13,17 @@ pythonfmu 0.7.0 builds the archive; this module then completes and freezes it:
   Its random GUID and its generation time are replaced.
 - The GUID is derived from the content: the SHA-256 of every other file of the archive (name and
   bytes) and of the modelDescription written with an empty GUID.
+- The linux binary is the project's loader (:mod:`piezo_fmu.fmi.loader`: it finds a Python for
+  a native host and returns fmi2Error for a refused call); pythonfmu's binary, mended (see
+  ``drop_exit_unload`` and ``keep_references_on_exception``), is kept beside it as
+  ``PiezoImpactDamper.pythonfmu.so``.
 - The archive is written with sorted entries, a fixed timestamp and fixed permissions, stored
   uncompressed (so the bytes do not depend on the zlib build), without ``__pycache__``. A rebuild
   from the same sources is byte-identical, which is what ``--check`` relies on.
 
-The FMU carries the core (the ``piezo_fmu`` package, less this build script and the slave) and
-the slave as the top-level module ``piezo_fmu_slave`` in ``resources/``. At run time it needs
-only a Python 3 host with numpy.
+The FMU carries the core (the ``piezo_fmu`` package, less this build script, the slave and the
+loader's sources) and the slave as the top-level module ``piezo_fmu_slave`` in ``resources/``.
+At run time it needs a Python 3 with numpy: the host's, or one the loader finds.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import io
+import re
 import shutil
 import struct
 import sys
@@ -35,10 +40,11 @@ import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, Iterator, Optional
 
 from pythonfmu import FmuBuilder
 
+from piezo_fmu.fmi.loader import install_loader
 from piezo_fmu.fmu_slave import VARIABLES, Variable
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -48,8 +54,9 @@ SLAVE_SOURCE = PACKAGE_DIR / "fmu_slave.py"
 SLAVE_MODULE = "piezo_fmu_slave"
 MODEL_IDENTIFIER = "PiezoImpactDamper"
 DEFAULT_DEST = Path("fmus") / f"{MODEL_IDENTIFIER}.fmu"
-#: Files of the package that the FMU does not need at run time (the slave travels as SLAVE_MODULE).
-NOT_BUNDLED = frozenset({"fmu_build.py", "fmu_slave.py"})
+#: Files and folders of the package that the FMU does not need at run time (the slave travels as
+#: SLAVE_MODULE; the loader's sources become the FMU's binary).
+NOT_BUNDLED = frozenset({"fmu_build.py", "fmu_slave.py", "fmi/loader"})
 
 #: CoSimulation capability flags (pythonfmu defaults otherwise).
 CAPABILITIES = {
@@ -96,7 +103,8 @@ def stage_sources(workdir: Path) -> tuple[Path, list[Path]]:
     package = workdir / "piezo_fmu"
     for source in sorted(PACKAGE_DIR.rglob("*.py")):
         relative = source.relative_to(PACKAGE_DIR)
-        if "__pycache__" in relative.parts or relative.as_posix() in NOT_BUNDLED:
+        prefixes = {"/".join(relative.parts[:n]) for n in range(1, len(relative.parts) + 1)}
+        if "__pycache__" in relative.parts or prefixes & NOT_BUNDLED:
             continue
         target = package / relative
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -218,6 +226,16 @@ def _elf_sections(data: bytes) -> dict:
     return {data[names + h[0]:data.index(b"\0", names + h[0])].decode(): h for h in heads}
 
 
+def _symbols(data: bytes) -> Iterator[tuple[str, int, int]]:
+    """Name, address and size of every entry of an x86-64 ELF file's ``.symtab``."""
+    secs = _elf_sections(data)
+    symtab, strtab = secs[".symtab"], secs[".strtab"]
+    for off in range(symtab[4], symtab[4] + symtab[5], 24):
+        name, _, _, _, value, size = struct.unpack_from("<IBBHQQ", data, off)
+        start = strtab[4] + name
+        yield data[start:data.index(b"\0", start)].decode(), value, size
+
+
 def exit_functions(binary: bytes) -> tuple[list[int], Optional[int], int]:
     """What the dynamic loader calls at exit in an x86-64 ELF shared library.
 
@@ -226,11 +244,9 @@ def exit_functions(binary: bytes) -> tuple[list[int], Optional[int], int]:
     ``DT_FINI_ARRAYSZ`` entry. Raises ``ValueError`` when there is no such entry.
     """
     secs = _elf_sections(binary)
-    symtab, strtab = secs[".symtab"], secs[".strtab"]
     unload = None
-    for off in range(symtab[4], symtab[4] + symtab[5], 24):
-        name, _, _, _, value, _ = struct.unpack_from("<IBBHQQ", binary, off)
-        if b"onLibraryUnload" in binary[strtab[4] + name:binary.index(b"\0", strtab[4] + name)]:
+    for name, value, _ in _symbols(binary):
+        if "onLibraryUnload" in name:
             unload = value
     fini, rela, dynamic = secs[".fini_array"], secs[".rela.dyn"], secs[".dynamic"]
     entries = {}
@@ -267,6 +283,45 @@ def drop_exit_unload(binary: bytes) -> bytes:
     return bytes(data)
 
 
+#: One ``Py_XDECREF(this->member)`` as gcc inlined it (``%r13`` = this; 26 bytes): ``mov
+#: d8(%r13),%rdi; test %rdi,%rdi; je; mov (%rdi),%eax; test %eax,%eax; js; sub $1,%eax; mov
+#: %eax,(%rdi); je rel32``.
+_INLINED_XDECREF = rb"\x49\x8b\x7d.\x48\x85\xff\x74.\x8b\x07\x85\xc0\x78.\x83\xe8\x01\x89\x07\x0f\x84...."
+
+
+def keep_references_on_exception(binary: bytes) -> bytes:
+    """pythonfmu's linux binary with its exception handler no longer releasing the slave.
+
+    ``PySlaveInstance::handle_py_exception``, which turns an exception of the slave into Fatal,
+    first calls ``cleanPyObject()``, which flushes the log and then ``Py_XDECREF``s the slave's
+    class, the slave and its log queue, but leaves the instance holding them and using them on
+    the next call. So every exception takes one reference from each: with a slave that raised
+    three times in one instance (pythonfmu 0.7.0, fmpy) the log queue's count reached zero, and
+    after ten the process died of a segmentation fault. The instance only seemed usable after
+    one exception because the slave's reference cycles kept it alive until the garbage
+    collector ran. The three inlined decrements (the same 78 bytes in pythonfmu 0.7.0 and
+    pythonfmu3 0.3.4) are jumped over: a two-byte ``jmp`` at their start. The log is still
+    flushed, and the references are released once, when the instance is freed. Anything else
+    in the function is an error.
+    """
+    secs = _elf_sections(binary)
+    text = secs[".text"]
+    handlers = [(value, size) for name, value, size in _symbols(binary)
+                if "handle_py_exception" in name and "." not in name and size]
+    if len(handlers) != 1:
+        raise ValueError(f"{len(handlers)} handle_py_exception functions: not a pythonfmu binary this mends")
+    value, size = handlers[0]
+    start = value - text[3] + text[4]
+    found = [m.start() for m in re.finditer(b"(?:" + _INLINED_XDECREF + b"){3}", binary[start:start + size],
+                                            flags=re.DOTALL)]
+    if len(found) != 1:
+        raise ValueError(f"handle_py_exception has {len(found)} runs of three inlined Py_XDECREF: "
+                         "not a pythonfmu binary this mends")
+    data = bytearray(binary)
+    data[start + found[0]:start + found[0] + 2] = bytes([0xEB, 3 * 26 - 2])  # jmp rel8 past the three
+    return bytes(data)
+
+
 def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
     """The reproducible FMU bytes made from a raw pythonfmu build."""
     with zipfile.ZipFile(raw_fmu) as archive:
@@ -274,7 +329,9 @@ def freeze(raw_fmu: Path, variables: Iterable[Variable] = VARIABLES) -> bytes:
                  if not name.endswith("/") and "__pycache__" not in name and not name.endswith(".pyc")}
     for name in files:
         if name.startswith("binaries/linux64/") and name.endswith(".so"):
-            files[name] = drop_exit_unload(files[name])
+            files[name] = keep_references_on_exception(drop_exit_unload(files[name]))
+    identifier = ET.fromstring(files["modelDescription.xml"]).find("CoSimulation").get("modelIdentifier")
+    files = install_loader(files, 2, identifier)
     root = complete_model_description(files["modelDescription.xml"], variables)
     guid = content_guid(files, root)
     root.set("guid", guid)
