@@ -6,17 +6,23 @@ floor FMU is built from ``benchmarks/null_slave.py`` into a scratch directory; t
 the committed ``fmus/PiezoImpactDamper.fmu`` (or ``--fmu``). The timing process never imports
 ``piezo_fmu`` itself, so each FMU runs the core bundled in it, as a host would.
 
+Both FMUs have the project's loader as their binary. The floor is also timed with pythonfmu's
+own binary in the loader's place (the same archive otherwise), and the ratio of the two is what
+the loader costs (target: no measurable cost).
+
     python benchmarks/bench_fmu.py [--repeat N] [--fmu PATH]
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 from fmpy import extract, read_model_description, simulate_fmu
@@ -40,10 +46,24 @@ def time_run(unzipdir: str, model_description) -> tuple[float, float]:
     return time.process_time() - cpu, time.perf_counter() - wall
 
 
-def build_floor(dest: Path) -> None:
-    """Build the no-work FMU in a child process (which imports piezo_fmu; this one must not)."""
-    code = ("import sys; from pathlib import Path; from piezo_fmu.fmu_build import build_bytes; "
-            f"Path({str(dest)!r}).write_bytes(build_bytes(Path({str(HERE / 'null_slave.py')!r})))")
+def write_floors(with_loader: Path, without_loader: Path) -> None:
+    """The no-work FMU, and the same with pythonfmu's binary where the loader is (child process only)."""
+    from piezo_fmu.fmi.loader import REAL_SUFFIX
+    from piezo_fmu.fmu_build import build_bytes, deterministic_zip
+
+    data = build_bytes(HERE / "null_slave.py")
+    with_loader.write_bytes(data)
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        files = {name: archive.read(name) for name in archive.namelist()}
+    for name in [name for name in files if name.endswith(REAL_SUFFIX)]:
+        files[name[:-len(REAL_SUFFIX)] + ".so"] = files.pop(name)
+    without_loader.write_bytes(deterministic_zip(files))
+
+
+def build_floors(with_loader: Path, without_loader: Path) -> None:
+    """Build the floor FMUs in a child process (which imports piezo_fmu; this one must not)."""
+    code = (f"import sys; sys.path.insert(0, {str(HERE)!r}); from pathlib import Path; import bench_fmu; "
+            f"bench_fmu.write_floors(Path({str(with_loader)!r}), Path({str(without_loader)!r}))")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert "piezo_fmu" not in sys.modules
 
@@ -61,9 +81,9 @@ def main() -> None:
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="bench_fmu_") as scratch:
-        floor_fmu = Path(scratch) / "PiezoImpactDamperFloor.fmu"
-        build_floor(floor_fmu)
-        fmus = {"piezo": args.fmu, "floor": floor_fmu}
+        floor_fmu, bare_floor_fmu = Path(scratch) / "floor.fmu", Path(scratch) / "floor_without_loader.fmu"
+        build_floors(floor_fmu, bare_floor_fmu)
+        fmus = {"piezo": args.fmu, "floor": floor_fmu, "floor_without_loader": bare_floor_fmu}
         unzipped = {key: extract(str(path)) for key, path in fmus.items()}
         described = {key: read_model_description(str(path)) for key, path in fmus.items()}
         if not same_interface(described["piezo"], described["floor"]):
@@ -80,6 +100,7 @@ def main() -> None:
     cpu = {key: min(c for c, _ in values) for key, values in times.items()}
     wall = {key: min(w for _, w in values) for key, values in times.items()}
     ratio = cpu["piezo"] / cpu["floor"]
+    loader_ratio = cpu["floor"] / cpu["floor_without_loader"]
     print(json.dumps({
         "case": f"nominal, 0 to {STOP_TIME} s, communication step {STEP} s ({steps} steps), fmpy",
         "runs_each": args.repeat, "statistic": "best run",
@@ -89,8 +110,12 @@ def main() -> None:
         "floor_us_per_step": 1e6 * cpu["floor"] / steps,
         "wall_ratio": wall["piezo"] / wall["floor"],
         "ratio": ratio, "target_ratio": TARGET_RATIO, "within_target": ratio <= TARGET_RATIO,
+        "floor_without_loader_cpu_s": cpu["floor_without_loader"],
+        "floor_without_loader_us_per_step": 1e6 * cpu["floor_without_loader"] / steps,
+        "loader_ratio": loader_ratio,
     }, indent=2))
-    print(f"ratio piezo / floor = {ratio:.2f} (target <= {TARGET_RATIO:g})")
+    print(f"ratio piezo / floor = {ratio:.2f} (target <= {TARGET_RATIO:g}); "
+          f"floor with / without the loader = {loader_ratio:.3f}")
 
 
 if __name__ == "__main__":
