@@ -6,9 +6,10 @@ the end of initialization: refused if not positive, RuntimeError at 13) and ``t_
 past it, or of a size that is not positive, is refused); the output ``y = gain * time`` and
 ``instances``, the number of slaves made so far in the interpreter (a counter on the ``sys``
 module, so that two FMUs show whether they share one), and ``references``, the slave's
-reference count (what pythonfmu's exception handler used to take away). ``exit_initialization_mode`` logs an
-information message (status OK, category ``logAll``). Refusals raise ``PiezoFmuRefusal``,
-defined here as the project defines it: the loader knows it by its name.
+reference count (what pythonfmu's exception handler used to take away).
+``exit_initialization_mode`` logs an information message (status OK, category ``logAll``).
+Refusals raise ``PiezoFmuRefusal``, defined here as the project defines it: the loader knows it
+by its name.
 """
 
 SLAVE_2 = "LoaderTest2"
