@@ -107,17 +107,27 @@ def python_without_numpy(tmp_path_factory) -> Path:
     return python
 
 
+def fake_python(folder: Path, script: str) -> Path:
+    path = folder / "python3"
+    path.write_text(f"#!/bin/sh\n{script}\n")
+    path.chmod(0o755)
+    return path
+
+
 @pytest.fixture(scope="module")
 def hanging_python(tmp_path_factory) -> Path:
-    script = tmp_path_factory.mktemp("hang") / "python3"
-    script.write_text("#!/bin/sh\nexec sleep 600\n")
-    script.chmod(0o755)
-    return script
+    return fake_python(tmp_path_factory.mktemp("hang"), "exec sleep 600")
 
 
-@pytest.mark.parametrize("case", ["missing", "without numpy", "hanging", "none on PATH"])
+@pytest.fixture(scope="module")
+def silent_hanging_python(tmp_path_factory) -> Path:
+    """One that closes its output at once, then does not exit."""
+    return fake_python(tmp_path_factory.mktemp("silent"), "exec >&- 2>&-; exec sleep 600")
+
+
+@pytest.mark.parametrize("case", ["missing", "without numpy", "hanging", "hanging, output closed", "none on PATH"])
 def test_without_a_usable_python_instantiation_fails_with_what_to_set(case, host, tmp_path, python_without_numpy,
-                                                                      hanging_python):
+                                                                      hanging_python, silent_hanging_python):
     env, said = {
         "missing": ({"PIEZO_FMU_PYTHON": "/nonexistent/bin/python3"},
                     "tried PIEZO_FMU_PYTHON=/nonexistent/bin/python3: cannot run it (No such file or directory)"),
@@ -126,6 +136,8 @@ def test_without_a_usable_python_instantiation_fails_with_what_to_set(case, host
                           "(ModuleNotFoundError(\"No module named 'numpy'\"))"),
         "hanging": ({"PIEZO_FMU_PYTHON": str(hanging_python), "PIEZO_FMU_PYTHON_TIMEOUT": "1"},
                     f"tried PIEZO_FMU_PYTHON={hanging_python}: it did not answer within 1 s"),
+        "hanging, output closed": ({"PIEZO_FMU_PYTHON": str(silent_hanging_python), "PIEZO_FMU_PYTHON_TIMEOUT": "1"},
+                                   f"tried PIEZO_FMU_PYTHON={silent_hanging_python}: it did not answer within 1 s"),
         "none on PATH": ({"PATH": str(tmp_path)}, f"there is no python3 on PATH={tmp_path}"),
     }[case]
     started = time.perf_counter()

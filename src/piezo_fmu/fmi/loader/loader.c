@@ -395,11 +395,20 @@ static int ask_python(const char *python, PythonFacts *facts, char *why, size_t 
         length += keep;
     }
     close(fds[0]);
-    if (timed_out) kill(pid, SIGKILL);
+    /* Its output has ended; it gets until the deadline to exit too. */
     int wstatus = 0;
-    pid_t waited;
-    do waited = waitpid(pid, &wstatus, 0);
-    while (waited < 0 && errno == EINTR);
+    pid_t waited = 0;
+    while (!timed_out && output) {
+        waited = waitpid(pid, &wstatus, WNOHANG);
+        if (waited != 0 && !(waited < 0 && errno == EINTR)) break; /* it exited, or is not ours to wait for */
+        if (now_s() >= deadline) timed_out = 1;
+        else poll(NULL, 0, 10);
+    }
+    if (timed_out || !output) {
+        kill(pid, SIGKILL);
+        do waited = waitpid(pid, &wstatus, 0);
+        while (waited < 0 && errno == EINTR);
+    }
     if (!output) {
         snprintf(why, why_size, "out of memory");
         return 0;
