@@ -49,9 +49,10 @@ def time_run(unzipdir: str, model_description) -> tuple[float, float]:
 def write_floors(with_loader: Path, without_loader: Path) -> None:
     """The no-work FMU, and the same with pythonfmu's binary where the loader is (child process only)."""
     from piezo_fmu.fmi.loader import REAL_SUFFIX
-    from piezo_fmu.fmu_build import build_bytes, deterministic_zip
+    from piezo_fmu.fmi.archive import deterministic_zip
+    from piezo_fmu.fmi.build import FMI2, build_bytes
 
-    data = build_bytes(HERE / "null_slave.py")
+    data = build_bytes(FMI2, HERE / "null_slave.py")
     with_loader.write_bytes(data)
     with zipfile.ZipFile(io.BytesIO(data)) as archive:
         files = {name: archive.read(name) for name in archive.namelist()}

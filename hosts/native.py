@@ -7,19 +7,21 @@ is to find (``python3`` in the folder of the given interpreter, a virtual enviro
 ``bin``). No ``LD_PRELOAD``, ``PYTHONHOME`` or ``PYTHONPATH``: the FMU finds Python itself. The
 FMU archive is extracted to a scratch folder for the run. ``hosts/run_native_host.sh`` remains
 for those who prefer to put libpython into a host themselves.
+
+It imports nothing of ``piezo_fmu``: a process that has run an FMU may hold the FMU's bundled copy
+of the package under that name.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import zipfile
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
-
-from piezo_fmu.fmi.loader import compiler, fmi_headers
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "native_host.c"
@@ -31,6 +33,23 @@ SYSTEM_PATH = "/usr/bin:/bin"
 #: kernels (``OPENBLAS_CORETYPE``, ...), which decide the last bits of the core's products, so
 #: that the host computes with the same kernels as a Python importer in this process.
 KERNEL_PREFIXES = ("OPENBLAS_", "NPY_")
+
+
+def fmi_headers() -> Path:
+    """The folder with fmpy's copy of the FMI 2.0 and 3.0 headers."""
+    import fmpy
+
+    folder = Path(fmpy.__file__).resolve().parent / "c-code"
+    if not (folder / "fmi3FunctionTypes.h").is_file():
+        raise FileNotFoundError(f"no FMI headers in {folder}")
+    return folder
+
+
+def compiler() -> str:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        raise FileNotFoundError("no C compiler: install one (Debian: apt-get install gcc)")
+    return cc
 
 
 def build(dest: Optional[Path] = None) -> Path:

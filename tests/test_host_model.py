@@ -4,7 +4,7 @@
    and loads ``binaries/linux64/PiezoImpactDamper.so`` from the extracted FMU: the project's
    loader, which finds a Python itself. pythonfmu's own binary cannot be loaded by such a host
    (proved); the FMU can: in a bare environment (only ``PATH``, no ``LD_PRELOAD``,
-   ``PYTHONHOME`` or ``PYTHONPATH``) the nominal case (MODEL.md section 7, 2 s at a 1 ms step)
+   ``PYTHONHOME`` or ``PYTHONPATH``) the nominal case (docs/model.md section 7, 2 s at a 1 ms step)
    runs cleanly, exits with status 0 and nothing on stderr, and its results equal fmpy's bit
    for bit. ``tests/test_loader.py`` tests the loader itself.
 2. ``hosts/system/OspSystemStructure.xml`` couples ``PrimaryStructure.fmu`` (an SDOF floor on a
@@ -82,6 +82,17 @@ def test_c_host_runs_the_nominal_case_cleanly_in_a_bare_environment_and_equals_f
     comparison = scenario.compare(time, outputs, reference.time, reference.outputs, rel_tol=0.0)
     assert comparison.all_bit_identical, comparison.report()
     assert outputs["impact_count"][-1] > 0 and outputs["main_displacement"][0] == 0.01
+
+
+def test_c_host_runs_the_fmi3_fmu_in_a_bare_environment_and_equals_fmpy(host, tmp_path):
+    """The FMI 3.0 FMU, through its own loader, gives the FMI 2.0 FMU's bits in fmpy."""
+    out = tmp_path / "nominal3.csv"
+    native.run(FMU.with_name("PiezoImpactDamper3.fmu"), out,
+               ["--stop", repr(NOMINAL_STOP), "--step", repr(NOMINAL_STEP)], executable=host)
+    time, outputs = scenario.read_csv(out)
+    reference = fmpy_nominal()
+    comparison = scenario.compare(time, outputs, reference.time, reference.outputs, rel_tol=0.0)
+    assert comparison.all_bit_identical, comparison.report()
 
 
 def test_c_host_runs_the_cross_check_scenario(host, tmp_path):

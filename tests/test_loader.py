@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from hosts import native  # noqa: E402
-from piezo_fmu import fmu_build  # noqa: E402
+from piezo_fmu.fmi import archive as fmu_archive  # noqa: E402
 from piezo_fmu.fmi.loader import LINUX_BINARIES, REAL_SUFFIX, compile_loader, install_loader  # noqa: E402
 from piezo_fmu.fmi.loader.generate import api, pythonfmu3_unimplemented  # noqa: E402
 from tests.loader_slaves import SLAVE_2, SLAVE_3, SOURCE_2, SOURCE_3  # noqa: E402
@@ -58,11 +58,11 @@ def build_tiny(version: int, folder: Path, mend_references: bool = True) -> Path
     with zipfile.ZipFile(folder / f"{IDENTIFIER[version]}.fmu") as archive:
         files = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
     binary = f"{LINUX_BINARIES[version]}/{IDENTIFIER[version]}.so"
-    files[binary] = fmu_build.drop_exit_unload(files[binary])
+    files[binary] = fmu_archive.drop_exit_unload(files[binary])
     if mend_references:
-        files[binary] = fmu_build.keep_references_on_exception(files[binary])
+        files[binary] = fmu_archive.keep_references_on_exception(files[binary])
     dest = folder / f"{IDENTIFIER[version]}_with_loader.fmu"
-    dest.write_bytes(fmu_build.deterministic_zip(install_loader(files, version, IDENTIFIER[version])))
+    dest.write_bytes(fmu_archive.deterministic_zip(install_loader(files, version, IDENTIFIER[version])))
     return dest
 
 
@@ -278,7 +278,7 @@ def test_in_fmpy_any_other_exception_stays_fatal(tiny, tmp_path, version):
 @pytest.mark.parametrize("version", [2, 3])
 def test_an_instance_keeps_its_references_through_any_number_of_refusals(tiny, tmp_path, version):
     """pythonfmu's exception handler released the slave, its class and its log queue at every
-    exception while the instance kept using them (see ``fmu_build.keep_references_on_exception``;
+    exception while the instance kept using them (see ``piezo_fmu.fmi.archive.keep_references_on_exception``;
     shown below on the binary as shipped): three refusals emptied the log queue's count, ten
     crashed the process. The build mends the binary: 100 refusals, a garbage collection, a reset
     and a run, and the slave's reference count has not moved."""
@@ -323,11 +323,11 @@ def test_the_mend_is_two_bytes_of_each_pythonfmu_binary_and_refuses_anything_els
 
     for package, folder in ((pythonfmu, "linux64"), (pythonfmu3, "x86_64-linux")):
         binary = (Path(package.__file__).parent / "resources" / "binaries" / folder / "libpythonfmu-export.so").read_bytes()
-        mended = fmu_build.keep_references_on_exception(binary)
+        mended = fmu_archive.keep_references_on_exception(binary)
         changed = [i for i, (a, b) in enumerate(zip(binary, mended)) if a != b]
         assert len(mended) == len(binary) and len(changed) == 2 and mended[changed[0]:changed[0] + 2] == b"\xeb\x4c"
         with pytest.raises(ValueError, match="not a pythonfmu binary this mends"):
-            fmu_build.keep_references_on_exception(mended)
+            fmu_archive.keep_references_on_exception(mended)
 
 
 @pytest.mark.parametrize("version", [2, 3])
@@ -395,11 +395,16 @@ def test_the_loader_is_byte_reproducible(version):
     assert compile_loader.__wrapped__(version) == compile_loader.__wrapped__(version)
 
 
-def test_the_committed_fmu_has_the_loader_and_pythonfmus_binary_beside_it():
-    with zipfile.ZipFile(FMU) as archive:
+@pytest.mark.parametrize("version, fmu, windows", [
+    (2, FMU, "binaries/win64/PiezoImpactDamper.dll"),
+    (3, FMU.with_name("PiezoImpactDamper3.fmu"), "binaries/x86_64-windows/PiezoImpactDamper3.dll"),
+])
+def test_the_committed_fmus_have_the_loader_and_pythonfmus_binary_beside_it(version, fmu, windows):
+    binary = f"{LINUX_BINARIES[version]}/{fmu.stem}"
+    with zipfile.ZipFile(fmu) as archive:
         names = set(archive.namelist())
-        loader = archive.read("binaries/linux64/PiezoImpactDamper.so")
-    assert f"binaries/linux64/PiezoImpactDamper{REAL_SUFFIX}" in names
-    assert "binaries/win64/PiezoImpactDamper.dll" in names  # pythonfmu's, which finds python3.dll itself
-    assert loader == compile_loader(2)
+        loader = archive.read(f"{binary}.so")
+    assert f"{binary}{REAL_SUFFIX}" in names
+    assert windows in names  # pythonfmu's, which finds python3.dll itself
+    assert loader == compile_loader(version)
     assert not any(name.startswith("resources/piezo_fmu/fmi/loader") for name in names)

@@ -1,7 +1,7 @@
 """Exact propagation of a linear phase ``x' = A x`` over short brackets.
 
 Both phases of the damper are linear with constant coefficients once the base input is a
-first-order hold (MODEL.md sections 2-3). In deviation coordinates from the moving base,
+first-order hold (docs/model.md sections 2-3). In deviation coordinates from the moving base,
 ``u = p - y(t)`` and ``w = q - y(t)``, the ramp of the hold is the exact particular solution,
 so the state ``x = (u, w, u', w', 1)`` obeys ``x' = A x`` (the constant 1 carries the contact
 offset ``d/2``). Its solution is ``x(t0 + s tau) = exp(A s tau) x(t0)``.
