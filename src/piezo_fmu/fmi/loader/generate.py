@@ -30,6 +30,7 @@ import argparse
 import re
 import sys
 from dataclasses import dataclass
+from importlib.metadata import distribution
 from pathlib import Path
 
 #: Functions with their own code in ``loader.c`` (no instance first, or not a plain forward).
@@ -108,12 +109,12 @@ def pythonfmu3_unimplemented() -> frozenset[str]:
     """FMI 3.0 functions whose pythonfmu3 implementation throws out of the C API.
 
     pythonfmu3 defines them with its ``NOT_IMPLEMENTED`` macro (a ``throw std::logic_error``
-    outside any ``try``), directly or through ``NOT_IMPLEMENTED_GETTER`` / ``_SETTER``.
+    outside any ``try``), directly or through ``NOT_IMPLEMENTED_GETTER`` / ``_SETTER``. The file
+    is found through the installed distribution, not ``import pythonfmu3``: in a process where a
+    pythonfmu3 FMU has run, that name can be the FMU's bundled copy, which has no sources.
     """
-    import pythonfmu3
-
-    source = (Path(pythonfmu3.__file__).resolve().parent / "pythonfmu-export" / "src" / "cppfmu"
-              / "fmi_functions.cpp").read_text()
+    source = Path(distribution("pythonfmu3").locate_file(
+        "pythonfmu3/pythonfmu-export/src/cppfmu/fmi_functions.cpp")).read_text()
     source = re.sub(r"^#define(?:.*\\\n)*.*$", "", source, flags=re.M)  # the macros' own definitions
     accessors = re.findall(r"NOT_IMPLEMENTED_(GET|SET)TER\((\w+),", source)
     names = {f"fmi3{kind.capitalize()}{suffix}" for kind, suffix in accessors}
