@@ -137,12 +137,12 @@ def run_builder(target: Target, script: Path, project_files: list[Path], outdir:
 def freeze(raw_fmu: Path, target: Target) -> bytes:
     """The reproducible FMU bytes made from a raw build."""
     files = archive.read_archive(raw_fmu)
-    for name in files:
-        if name.startswith(target.linux_binaries) and name.endswith(".so"):
-            if target.fmi_version == 2:
-                files[name] = archive.drop_exit_unload(files[name])
-            files[name] = archive.keep_references_on_exception(files[name])
-    files = install_loader(files, target.fmi_version, target.model_identifier)
+    binary, = [name for name in files if name.startswith(target.linux_binaries) and name.endswith(".so")]
+    if target.fmi_version == 2:
+        files[binary] = archive.drop_exit_unload(files[binary])
+    files[binary] = archive.keep_references_on_exception(files[binary])
+    # the slave's class names the binary: the target's model, or a benchmark's floor
+    files = install_loader(files, target.fmi_version, Path(binary).stem)
     root = target.complete(files["modelDescription.xml"], target.variables, target.capabilities)
     identity = archive.content_identity(files, description.xml_bytes(root))
     root.set(target.identity, identity)
@@ -150,11 +150,11 @@ def freeze(raw_fmu: Path, target: Target) -> bytes:
     return archive.deterministic_zip(files)
 
 
-def build_bytes(target: Target = FMI2, script: Optional[Path] = None) -> bytes:
+def build_bytes(target: Target = FMI2, script: Optional[Path] = None, modules: tuple[Path, ...] = ()) -> bytes:
     """Build one FMU in a scratch directory and return its bytes.
 
     ``script`` defaults to the target's slave. Another slave script (the benchmark's no-work slave)
-    gets the same bundle, with the target's slave beside it as a module it can import.
+    gets the same bundle, with the target's slave and ``modules`` beside it as modules it can import.
     """
     with tempfile.TemporaryDirectory(prefix="piezo_fmu_build_") as scratch:
         scratch = Path(scratch)
@@ -164,6 +164,9 @@ def build_bytes(target: Target = FMI2, script: Optional[Path] = None) -> bytes:
         slave, project_files = stage_sources(stage, target)
         if script is not None:
             project_files.append(slave)
+            for module in modules:
+                shutil.copyfile(module, stage / Path(module).name)
+                project_files.append(stage / Path(module).name)
             slave = stage / Path(script).name
             shutil.copyfile(script, slave)
         return freeze(run_builder(target, slave, project_files, out), target)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import functools
 import math
+from math import isfinite
 from typing import Callable, Optional
 
 from piezo_fmu import Parameters, Simulator
@@ -44,8 +45,8 @@ _RUNS = _runs(_BY_CAUSALITY["output"])
 #: The outputs that are 0 while the core's reading is NaN (a metric not defined yet).
 _UNDEFINED_IS_ZERO = tuple(vr for vr in _BY_CAUSALITY["output"] if VARIABLES[vr].undefined_is_zero)
 _Y, _V = BY_NAME["base_displacement"], BY_NAME["base_velocity"]
-#: The variables whose values do not depend on the core's state: read without updating.
-_SET_BY_HOST = frozenset(_BY_CAUSALITY["parameter"] + _BY_CAUSALITY["input"])
+#: The variables whose values come from the core: reading one brings them up to date.
+_FROM_CORE = frozenset(_BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
 #: Output and calculated values while there is no core (bad start values): NaN, and 0 for the Integer.
 _NO_CORE = tuple((vr, 0 if VARIABLES[vr].type == "Integer" else math.nan)
                  for vr in _BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
@@ -72,20 +73,13 @@ def guarded(fallback: Callable):
     return wrap
 
 
-def on_nanosecond_grid(t: float) -> float:
-    """``t`` moved to the nearest whole nanosecond when it lies within ``1e-12 * max(1, |t|)`` s
-    of it, else ``t`` unchanged."""
-    snapped = round(t * 1e9) / 1e9
-    return snapped if abs(snapped - t) <= 1e-12 * max(1.0, abs(t)) else t
-
-
 def _step_end(t_now: float, current_time: float, step_size: float) -> float:
-    """Where a step ends: ``current_time + step_size``, on the whole nanosecond it is within
-    rounding of (so that masters that round their time differently agree), never at or before
-    the FMU's own time."""
+    """Where a step ends: ``current_time + step_size``, moved to the nearest whole nanosecond when it
+    lies within ``1e-12 * max(1, |t|)`` s of it (so that masters that round their time differently
+    agree), but never to or before the FMU's own time ``t_now``."""
     end = current_time + step_size
-    snapped = on_nanosecond_grid(end)
-    return snapped if snapped > t_now else end
+    snapped = round(end * 1e9) / 1e9
+    return snapped if abs(snapped - end) <= 1e-12 * max(1.0, abs(end)) and snapped > t_now else end
 
 
 class CoSimulation:
@@ -109,11 +103,12 @@ class CoSimulation:
         self._sim: Optional[Simulator] = None
         self._stale = True  # start values changed since the core was built
         self._stepping = False  # past ExitInitializationMode
+        self._first_step = False  # no step yet since ExitInitializationMode (FMI 3.0: start_at)
         self._fault: Optional[str] = None  # why every further step must fail
 
     def get(self, vrs) -> list:
         """The values of the variables ``vrs`` (value references, already checked for their type)."""
-        if not self._current and not _SET_BY_HOST.issuperset(vrs):
+        if not self._current and not _FROM_CORE.isdisjoint(vrs):
             self._update()
         now = self.now
         return [now[vr] for vr in vrs]
@@ -146,7 +141,7 @@ class CoSimulation:
 
     def _update(self) -> None:
         """Bring the outputs (and, with a new core, the calculated parameters) in ``now`` up to date."""
-        sim = self._core()
+        sim = self._sim if self._stepping or not self._stale else self._core()
         now = self.now
         if sim is None:
             for vr, value in _NO_CORE:
@@ -204,18 +199,20 @@ class CoSimulation:
         return self._sim.t if self._sim is not None and not self._stale else self._start_time
 
     def start_at(self, t0: float) -> None:
-        """Start at ``t0`` (s) instead of the start time set, if the core has not moved yet (pythonfmu3
-        does not pass FMI 3.0's start time on: a co-simulation learns it from its first step)."""
-        sim = self._sim
-        if self._stepping and sim is not None and sim.t == self._start_time != t0 and not sim.brackets_opened:
-            self._start_time, self._stepping = float(t0), False
-            self._start_values_changed()
-            self._core()
-            self._stepping = True
+        """Start at ``t0`` (s) instead of the start time set, at the first step after initialization
+        (pythonfmu3 does not pass FMI 3.0's start time on: a co-simulation learns it from its first
+        step)."""
+        if self._first_step:
+            self._first_step = False
+            if t0 != self._start_time and self._sim is not None:
+                self._start_time, self._stepping = float(t0), False
+                self._start_values_changed()
+                self._core()
+                self._stepping = True
 
     def exit_initialization(self) -> None:
         self._core()
-        self._stepping = True
+        self._stepping, self._first_step = True, True
         if self._fault is not None:
             self._log_error(self._fault)
 
@@ -232,8 +229,9 @@ class CoSimulation:
         if not abs(current_time - t) <= 1e-12 * max(1.0, abs(t)):
             return self._fail(f"the step starts at t = {current_time!r} s but the FMU is at t = {t!r} s; "
                               "a step must continue from the end of the previous one")
-        y, v = self.now[_Y], self.now[_V]
-        if not (math.isfinite(y) and math.isfinite(v)):
+        now = self.now
+        y, v = now[_Y], now[_V]
+        if not (isfinite(y) and isfinite(v)):
             return self._fail(f"step from t = {current_time!r} s refused: {self._bad_inputs()}")
         self._current = False
         try:
@@ -268,6 +266,7 @@ class CoSimulation:
 
     def set_state(self, state: dict) -> None:
         state = copy.deepcopy(state)  # the host may set the same state again later
+        self._first_step = False
         for name, value in {**state["values"], **state["inputs"]}.items():
             self.now[BY_NAME[name]] = value
         self._start_time, self._stepping = state["start_time"], state["stepping"]

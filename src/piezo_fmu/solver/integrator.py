@@ -29,7 +29,7 @@ from .brackets import MAXIMUM, PEAK, VOLTAGE_PEAK, Bracket, BracketMaps, Bracket
 from .circuit import CircuitState
 from .ledger import Ledger
 from .metrics import MetricAccumulators, Metrics
-from .propagation import MIN_BRACKET, POWERS_AT_END, STATE_TERMS, LinearPhase, powers
+from .propagation import MIN_BRACKET, POWER_EXPONENTS, POWERS_AT_END, STATE_TERMS, LinearPhase
 from .records import Impact
 from .roots import horner
 
@@ -122,8 +122,10 @@ class Integrator:
                 self._bracket = self._open_bracket()
                 self.brackets_opened += 1
             br = self._bracket
-            s_stop = min(1.0, (t_end - br.t_start) / br.tau)
-            s_to = min(s_stop, br.s_switch)
+            s_stop = (t_end - br.t_start) / br.tau
+            if s_stop > 1.0:
+                s_stop = 1.0
+            s_to = s_stop if s_stop < br.s_switch else br.s_switch
             while br.events and br.events[0][0] <= s_to:
                 self._non_terminal_event(br, *br.events.pop(0))
             if br.s_switch <= s_stop:
@@ -146,8 +148,8 @@ class Integrator:
 
     def _move_to(self, br: Bracket, s: float, t: float) -> None:
         """Set the state to the bracket's trajectory at normalised time ``s`` (time ``t``)."""
-        br.powers = POWERS_AT_END if s == 1.0 else powers(s)
-        u, w, du, dw = br.powers[:STATE_TERMS].dot(br.c).tolist()[:4]  # ndarray.dot: np.dot without its dispatch
+        br.powers = pw = POWERS_AT_END if s == 1.0 else s ** POWER_EXPONENTS  # propagation.powers, inlined
+        u, w, du, dw = pw[:STATE_TERMS].dot(br.c).tolist()[:4]  # ndarray.dot: np.dot without its dispatch
         base = br.base + br.v * s * br.tau
         self.t = t
         self._p, self._q = u + base, w + base

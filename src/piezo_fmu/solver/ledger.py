@@ -63,7 +63,7 @@ class EnergyLedger(NamedTuple):
     @property
     def harvested(self) -> float:
         """Energy harvested in the loads of both barriers so far, J."""
-        return self.harvested_left + self.harvested_right
+        return self.totals()[2]
 
     @property
     def electrical_balance_error(self) -> float:
@@ -73,12 +73,21 @@ class EnergyLedger(NamedTuple):
     @property
     def dissipated(self) -> float:
         """All energy dissipated so far, J."""
-        return self.dissipated_C + self.dissipated_Ceq + self.plastic
+        return self.totals()[0]
 
     @property
     def balance_error(self) -> float:
         """``total - (initial + work_base - dissipated - electrical_work)``, J: zero for exact bookkeeping."""
-        return self.total - (self.initial + self.work_base - self.dissipated - self.electrical_work)
+        return self.totals()[1]
+
+    def totals(self) -> tuple[float, float, float]:
+        """:attr:`dissipated`, :attr:`balance_error` and :attr:`harvested` (J), at once (a host that
+        reads them all at every step reads them here)."""
+        kinetic, potential_K, potential_Keq, dissipated_C, dissipated_Ceq, plastic, work_base, initial, \
+            _, harvested_left, harvested_right, _, electrical_work = self
+        dissipated = dissipated_C + dissipated_Ceq + plastic
+        balance_error = kinetic + potential_K + potential_Keq - (initial + work_base - dissipated - electrical_work)
+        return dissipated, balance_error, harvested_left + harvested_right
 
 
 def ledger_integrals(rates: np.ndarray, powers: np.ndarray) -> np.ndarray:

@@ -35,7 +35,8 @@ _K = np.arange(ORDER + 1)
 STATE_TERMS = ORDER + 1
 #: Coefficients of the primitive of a squared bracket polynomial (degree 2 ORDER + 1).
 PRIMITIVE_TERMS = 2 * ORDER + 2
-_LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
+#: The exponents ``k`` of :func:`powers`.
+POWER_EXPONENTS = _LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
 #: The series is built by doubling (``LinearPhase``) up to the first power of 2 above ORDER.
 _DOUBLED = 1 << ORDER.bit_length()
 #: ``1 / C(m + j, m)`` for j < m, m a power of 2.

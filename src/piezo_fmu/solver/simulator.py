@@ -103,16 +103,18 @@ class Simulator(Integrator):
         left, right = (deflection, 0.0) if side == LEFT else (0.0, deflection)
         metrics, energy = self.metrics, self.energy
         if self._circuit is None:
-            k_V = self.barrier.k_V
-            v_left, v_right = quasi_static(k_V, left), quasi_static(k_V, right)
+            # The quasi-static voltage of the barrier in contact; the other one's is 0.
+            v = quasi_static(self.barrier.k_V, deflection)
+            v_left, v_right = (v, 0.0) if side == LEFT else (0.0, v)
             power_left = power_right = 0.0
         else:
             v_left, v_right = self._circuit_now(LEFT)[0], self._circuit_now(RIGHT)[0]
             R = self.params.R_load
             power_left, power_right = v_left * v_left / R, v_right * v_right / R
+        dissipated, balance_error, harvested = energy.totals()
         return (self._p, self._dp, self._q, self._dq, left, right, v_left, v_right, self.base_force,
                 metrics.impact_count, metrics.last_impact_voltage, metrics.V_rms, metrics.P_ave, metrics.DI,
-                energy.dissipated, energy.balance_error, energy.harvested, power_left, power_right,
+                dissipated, balance_error, harvested, power_left, power_right,
                 energy.harvested_left, energy.harvested_right, metrics.DI_ls)
 
     @property
