@@ -103,3 +103,13 @@ def test_fmi3_declares_the_fmi2_variables_under_the_same_references_and_attribut
     assert (time.name, time.unit) == ("time", "s")
     assert three.modelName == two.modelName == "PiezoImpactDamper"
     assert three.coSimulation.canGetAndSetFMUstate and three.coSimulation.canSerializeFMUstate
+
+
+@pytest.mark.parametrize("target", TARGETS, ids=IDS)
+def test_the_fmu_carries_the_package_version(target):
+    from importlib.metadata import version
+
+    import piezo_fmu
+
+    md = read_model_description(str(ROOT / target.dest))
+    assert md.version == piezo_fmu.__version__ == version("piezo-fmu")

@@ -11,6 +11,8 @@ The package is layered, and imports run one way:
 The model and the solver are plain Python and numpy and know nothing of FMI.
 """
 
+__version__ = "0.2.0"
+
 from .model import (CIRCUIT, COUPLED, DERIVED, EXPLICIT, QUASI_STATIC, Barrier, Damper, Parameters, derive_barrier,
                     parameter_info)
 from .solver import EnergyLedger, Impact, Metrics, Simulator, State, perfectibility

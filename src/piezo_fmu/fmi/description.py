@@ -12,6 +12,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from typing import Iterable
 
+from piezo_fmu import __version__
 from piezo_fmu.fmi.variables import Variable
 
 #: The name of the FMUs' model (FMI 3.0's modelIdentifier differs: it names the binary).
@@ -75,10 +76,11 @@ def _unit_definitions(used_units: set) -> ET.Element:
 
 def _common(root: ET.Element, identity: str, capabilities: dict, interfaces: Iterable[str]) -> None:
     """What both versions need: no build time, the build named, the identity left empty, the
-    capability flags set on each interface element."""
+    package's version, the capability flags set on each interface element."""
     root.attrib.pop("generationDateAndTime", None)  # a timestamp would break reproducibility
     root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmi.build")
     root.set(identity, "")
+    root.set("version", __version__)
     for interface in interfaces:
         element = root.find(interface)
         if element is not None:
