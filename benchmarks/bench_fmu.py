@@ -12,17 +12,23 @@ does no work. So the ratio is what the core and its readings add on top of FMI, 
 binary and fmpy. The piezo FMUs are the committed ``fmus/*.fmu``. The timing process never imports
 ``piezo_fmu``: each FMU runs the core bundled in it, as a host would.
 
+All these FMUs have the project's loader as their linux binary. Each floor is also timed with
+pythonfmu's own binary in the loader's place (the same archive otherwise): the ratio of the two
+is what the loader costs a step (target: no measurable cost).
+
     python benchmarks/bench_fmu.py [--repeat N] [--fmi 2 --fmi 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 from fmpy import extract, read_model_description, simulate_fmu
@@ -47,11 +53,25 @@ def time_run(unzipdir: str, model_description) -> tuple[float, float]:
     return time.process_time() - cpu, time.perf_counter() - wall
 
 
-def build_floor(version: int, dest: Path) -> None:
-    """Build a no-work FMU in a child process (which imports piezo_fmu; this one must not)."""
-    code = ("import sys; from pathlib import Path; from piezo_fmu.fmi.build import TARGETS, build_bytes; "
-            f"Path({str(dest)!r}).write_bytes(build_bytes(TARGETS[{version}], Path({str(FLOOR_SLAVES[version])!r}), "
-            f"(Path({str(HERE / 'no_core.py')!r}),)))")
+def write_floors(version: int, with_loader: Path, without_loader: Path) -> None:
+    """The no-work FMU, and the same with pythonfmu's binary where the loader is (child process only)."""
+    from piezo_fmu.fmi.archive import deterministic_zip
+    from piezo_fmu.fmi.build import TARGETS, build_bytes
+    from piezo_fmu.fmi.loader import REAL_SUFFIX
+
+    data = build_bytes(TARGETS[version], FLOOR_SLAVES[version], (HERE / "no_core.py",))
+    with_loader.write_bytes(data)
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        files = {name: archive.read(name) for name in archive.namelist()}
+    for name in [name for name in files if name.endswith(REAL_SUFFIX)]:
+        files[name[:-len(REAL_SUFFIX)] + ".so"] = files.pop(name)
+    without_loader.write_bytes(deterministic_zip(files))
+
+
+def build_floors(version: int, with_loader: Path, without_loader: Path) -> None:
+    """Build the no-work FMUs in a child process (which imports piezo_fmu; this one must not)."""
+    code = (f"import sys; sys.path.insert(0, {str(HERE)!r}); from pathlib import Path; import bench_fmu; "
+            f"bench_fmu.write_floors({version}, Path({str(with_loader)!r}), Path({str(without_loader)!r}))")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert "piezo_fmu" not in sys.modules
 
@@ -62,8 +82,8 @@ def same_interface(a, b) -> bool:
     return table(a) == table(b)
 
 
-def measure(version: int, repeat: int, floor_fmu: Path) -> dict:
-    fmus = {"piezo": FMUS[version], "floor": floor_fmu}
+def measure(version: int, repeat: int, floor_fmu: Path, bare_floor_fmu: Path) -> dict:
+    fmus = {"piezo": FMUS[version], "floor": floor_fmu, "floor_without_loader": bare_floor_fmu}
     unzipped = {key: extract(str(path)) for key, path in fmus.items()}
     described = {key: read_model_description(str(path)) for key, path in fmus.items()}
     if not same_interface(described["piezo"], described["floor"]):
@@ -86,6 +106,8 @@ def measure(version: int, repeat: int, floor_fmu: Path) -> dict:
         "core_us_per_step": 1e6 * (cpu["piezo"] - cpu["floor"]) / steps,
         "wall_ratio": wall["piezo"] / wall["floor"],
         "ratio": ratio, "target_ratio": TARGET_RATIO, "within_target": ratio <= TARGET_RATIO,
+        "floor_without_loader_us_per_step": 1e6 * cpu["floor_without_loader"] / steps,
+        "loader_ratio": cpu["floor"] / cpu["floor_without_loader"],
     }
 
 
@@ -97,15 +119,17 @@ def main() -> None:
     results = []
     versions = args.fmi or (2, 3)
     with tempfile.TemporaryDirectory(prefix="bench_fmu_") as scratch:
-        floors = {version: Path(scratch) / f"floor{version}.fmu" for version in versions}
-        for version, floor in floors.items():  # before any FMU has run in this process
-            build_floor(version, floor)
+        floors = {version: (Path(scratch) / f"floor{version}.fmu", Path(scratch) / f"floor{version}_without_loader.fmu")
+                  for version in versions}
+        for version, (floor, bare_floor) in floors.items():  # before any FMU has run in this process
+            build_floors(version, floor, bare_floor)
         for version in versions:
-            results.append(measure(version, args.repeat, floors[version]))
+            results.append(measure(version, args.repeat, *floors[version]))
     print(json.dumps(results, indent=2))
     for r in results:
         print(f"FMI {r['fmi_version']}: piezo {r['piezo_us_per_step']:.1f} us/step, floor {r['floor_us_per_step']:.1f} "
-              f"us/step, ratio {r['ratio']:.2f} (target <= {TARGET_RATIO:g})")
+              f"us/step, ratio {r['ratio']:.2f} (target <= {TARGET_RATIO:g}); floor with / without the loader "
+              f"{r['loader_ratio']:.3f}")
 
 
 if __name__ == "__main__":

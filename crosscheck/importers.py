@@ -16,9 +16,11 @@ communication points:
 - ``ecos``: ecos through ``ecospy``; it adds the step to its time at every step
   (``t_{k+1} = t_k + 0.001`` in floating point) and passes ``(t_k, 0.001)`` to ``fmi2DoStep``.
   The inputs are set through ``set_real`` before each step;
-- ``native``: the project's C host (``hosts/native_host.c``) under its launcher;
-- ``fmpy-fmi3`` and ``ecos-fmi3``: the same masters as ``fmpy`` and ``ecos`` on the FMI 3.0 FMU
-  (``fmus/PiezoImpactDamper3.fmu``, co-simulation; fmpy's ``FMU3Slave``).
+- ``native``: the project's C host (``hosts/native_host.c``) in a bare environment (its PATH
+  holding this Python; the FMU's loader finds it);
+- ``fmpy-fmi3``, ``ecos-fmi3`` and ``native-fmi3``: the same masters as ``fmpy``, ``ecos`` and
+  ``native`` on the FMI 3.0 FMU (``fmus/PiezoImpactDamper3.fmu``, co-simulation; fmpy's
+  ``FMU3Slave``).
 
 Each returns a :class:`Result` with the output time series and, where the driver knows them,
 the ``(t_k, h_k)`` it passed to ``fmi2DoStep``.
@@ -36,7 +38,7 @@ import numpy as np
 
 from crosscheck import scenario
 
-IMPORTERS = ("fmpy", "libcosim", "ecos", "native", "fmpy-simulate", "fmpy-fmi3", "ecos-fmi3")
+IMPORTERS = ("fmpy", "libcosim", "ecos", "native", "fmpy-simulate", "fmpy-fmi3", "ecos-fmi3", "native-fmi3")
 #: FMI 3.0 type names as the FMI 2.0 ones the results use.
 _FMI2_TYPE = {"Float64": "Real", "Int32": "Integer"}
 
@@ -328,8 +330,8 @@ def run_ecos(fmu: Path = scenario.FMU_PATH, importer: str = "ecos") -> Result:
 
 # -- the C host -----------------------------------------------------------------------------------
 
-def run_native(fmu: Path = scenario.FMU_PATH) -> Result:
-    """The project's C host, under ``hosts/run_native_host.sh``, on the cross-check input."""
+def run_native(fmu: Path = scenario.FMU_PATH, importer: str = "native") -> Result:
+    """The project's C host, in a bare environment, on the cross-check input."""
     from hosts import native
 
     with tempfile.TemporaryDirectory(prefix="piezo_native_") as scratch:
@@ -345,7 +347,7 @@ def run_native(fmu: Path = scenario.FMU_PATH) -> Result:
                for name, values in outputs.items()}
     times = scenario.grid()
     steps = [(float(times[k]), float(times[k + 1] - times[k])) for k in range(len(times) - 1)]
-    return Result("native", time, outputs, steps)
+    return Result(importer, time, outputs, steps)
 
 
 RUNNERS: dict[str, Callable[..., Result]] = {
@@ -356,6 +358,7 @@ RUNNERS: dict[str, Callable[..., Result]] = {
     "native": run_native,
     "fmpy-fmi3": lambda fmu=scenario.FMU3_PATH: run_fmpy(fmu, importer="fmpy-fmi3"),
     "ecos-fmi3": lambda fmu=scenario.FMU3_PATH: run_ecos(fmu, importer="ecos-fmi3"),
+    "native-fmi3": lambda fmu=scenario.FMU3_PATH: run_native(fmu, importer="native-fmi3"),
 }
 #: The FMU each importer runs by default.
 DEFAULT_FMUS = {importer: scenario.FMU3_PATH if importer.endswith("-fmi3") else scenario.FMU_PATH

@@ -7,7 +7,8 @@ Usage (from the repository root, with the project's Python)::
 
 IMPORTER is one of ``fmpy``, ``libcosim``, ``ecos``, ``native`` (the project's C host),
 ``fmpy-simulate`` (fmpy's own ``simulate_fmu``; see ReadMe.md for why it is not bit-identical
-to the others), or ``fmpy-fmi3`` and ``ecos-fmi3`` (the FMI 3.0 FMU in fmpy and ecos). ``all``
+to the others), or ``fmpy-fmi3``, ``ecos-fmi3`` and ``native-fmi3`` (the FMI 3.0 FMU in fmpy, ecos
+and the C host). ``all``
 runs all but ``fmpy-simulate``. For each importer the script prints the worst relative
 deviation of every output from ``PiezoImpactDamper_ref.csv`` (the band is defined in ReadMe.md
 and in :mod:`crosscheck.scenario`), whether the result is bit-identical to the reference, and
@@ -26,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from crosscheck import importers, scenario  # noqa: E402
 
-DEFAULT_SET = ("fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3")
+DEFAULT_SET = ("fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3", "native-fmi3")
 
 
 def write_files(fmu: Path) -> None:

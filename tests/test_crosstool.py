@@ -216,15 +216,15 @@ def test_fmpy_replaying_ecos_calls_is_bit_identical_to_ecos():
 
 # -- the cross-check script --------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("importer", ["fmpy-fmi3", "ecos-fmi3"])
-def test_the_fmi3_fmu_in_fmpy_and_in_ecos_gives_the_fmi2_fmus_bits(importer):
+@pytest.mark.parametrize("importer", ["fmpy-fmi3", "ecos-fmi3", "native-fmi3"])
+def test_the_fmi3_fmu_in_fmpy_ecos_and_the_c_host_gives_the_fmi2_fmus_bits(importer):
     fmi2, fmi3 = run(importer.removesuffix("-fmi3")), importers.run(importer)
     assert list(fmi3.outputs) == outputs_of_fmu() and fmi3.steps == fmi2.steps
     comparison = scenario.compare(fmi3.time, fmi3.outputs, fmi2.time, fmi2.outputs)
     assert comparison.all_bit_identical, comparison.report()
 
 
-@pytest.mark.parametrize("importer", ["fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3"])
+@pytest.mark.parametrize("importer", ["fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3", "native-fmi3"])
 def test_crosscheck_script_passes(importer):
     completed = subprocess.run([sys.executable, str(REPO / "crosscheck" / "run_crosscheck.py"), importer],
                                capture_output=True, text=True, timeout=300, cwd=REPO)

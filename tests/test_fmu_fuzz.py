@@ -545,7 +545,7 @@ def test_the_fmu_binary_does_not_touch_freed_memory_at_process_exit(unzipdir):
     pointer; Dask workers that ran the FMU aborted at exit with "free(): corrupted unsorted
     chunks" (6 of 6 sweeps). The build now drops that entry from ``.fini_array`` (the static's
     destructor already does the work): valgrind is clean and no Dask sweep aborts (0 of 6)."""
-    binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.so").read_bytes()
+    binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.pythonfmu.so").read_bytes()
     called, unload, _ = archive.exit_functions(binary)
     assert unload is None or unload not in called, (
         f"onLibraryUnload (0x{unload:x}) is in the exit functions {[hex(a) for a in called]}")

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import gc
 import math
+import subprocess
 import sys
 
 import numpy as np
@@ -232,6 +233,18 @@ def test_the_first_call_of_one_interface_decides_and_the_other_is_refused(first,
     # The event update: nothing is due at the start in Model Exchange, nothing ever in co-simulation.
     update = slave.update_discrete_states()
     assert (update.discreteStatesNeedUpdate, update.terminateSimulation) == (False, False)
+
+
+def test_model_exchange_runs_in_a_process_that_loaded_the_fmi2_fmu_first():
+    """A host process imports the bundled ``piezo_fmu`` once, from the FMU it loads first: the FMI 2.0
+    FMU's copy must serve the FMI 3.0 FMU's Model Exchange too (a fresh interpreter: the tests'
+    own import of the package would hide it)."""
+    script = (f"import fmpy\n"
+              f"fmpy.simulate_fmu({str(ROOT / 'fmus' / 'PiezoImpactDamper.fmu')!r}, stop_time=0.05, output_interval=1e-3)\n"
+              f"r = fmpy.simulate_fmu({str(FMU3)!r}, fmi_type='ModelExchange', stop_time=0.05, output_interval=1e-3)\n"
+              f"print(r['impact_count'][-1])\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and done.stdout.split()[-1] == "1", (done.returncode, done.stderr[-2000:])
 
 
 @pytest.mark.parametrize("values, words", [({"m": -1.0}, "m = -1.0 kg is out of range; allowed range (0, inf)"),

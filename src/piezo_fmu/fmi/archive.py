@@ -1,5 +1,6 @@
 """The FMU archive, reproducibly: sorted entries, fixed timestamps and modes, stored uncompressed,
-an identity derived from the content, and pythonfmu's linux binary mended.
+an identity derived from the content, and pythonfmu's linux binary mended (its exit functions,
+its exception handler).
 
 A rebuild from the same sources (and the same compiler, for the binaries made here) gives the
 same bytes, which is what the build's staleness check relies on.
@@ -9,11 +10,12 @@ from __future__ import annotations
 
 import hashlib
 import io
+import re
 import struct
 import uuid
 import zipfile
 from pathlib import Path
-from typing import Optional
+from typing import Iterator, Optional
 
 #: Fixed archive metadata (the earliest date a zip can hold; regular file, rw-r--r--).
 ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
@@ -60,6 +62,16 @@ def _elf_sections(data: bytes) -> dict:
     return {data[names + h[0]:data.index(b"\0", names + h[0])].decode(): h for h in heads}
 
 
+def _symbols(data: bytes) -> Iterator[tuple[str, int, int]]:
+    """Name, address and size of every entry of an x86-64 ELF file's ``.symtab``."""
+    secs = _elf_sections(data)
+    symtab, strtab = secs[".symtab"], secs[".strtab"]
+    for off in range(symtab[4], symtab[4] + symtab[5], 24):
+        name, _, _, _, value, size = struct.unpack_from("<IBBHQQ", data, off)
+        start = strtab[4] + name
+        yield data[start:data.index(b"\0", start)].decode(), value, size
+
+
 def exit_functions(binary: bytes) -> tuple[list[int], Optional[int], int]:
     """What the dynamic loader calls at exit in an x86-64 ELF shared library.
 
@@ -68,11 +80,9 @@ def exit_functions(binary: bytes) -> tuple[list[int], Optional[int], int]:
     ``DT_FINI_ARRAYSZ`` entry. Raises ``ValueError`` when there is no such entry.
     """
     secs = _elf_sections(binary)
-    symtab, strtab = secs[".symtab"], secs[".strtab"]
     unload = None
-    for off in range(symtab[4], symtab[4] + symtab[5], 24):
-        name, _, _, _, value, _ = struct.unpack_from("<IBBHQQ", binary, off)
-        if b"onLibraryUnload" in binary[strtab[4] + name:binary.index(b"\0", strtab[4] + name)]:
+    for name, value, _ in _symbols(binary):
+        if "onLibraryUnload" in name:
             unload = value
     fini, rela, dynamic = secs[".fini_array"], secs[".rela.dyn"], secs[".dynamic"]
     entries = {}
@@ -106,6 +116,45 @@ def drop_exit_unload(binary: bytes) -> bytes:
     data = bytearray(binary)
     tag, size = struct.unpack_from("<qQ", binary, size_at)
     struct.pack_into("<qQ", data, size_at, tag, size - 8)
+    return bytes(data)
+
+
+#: One ``Py_XDECREF(this->member)`` as gcc inlined it (``%r13`` = this; 26 bytes): ``mov
+#: d8(%r13),%rdi; test %rdi,%rdi; je; mov (%rdi),%eax; test %eax,%eax; js; sub $1,%eax; mov
+#: %eax,(%rdi); je rel32``.
+_INLINED_XDECREF = rb"\x49\x8b\x7d.\x48\x85\xff\x74.\x8b\x07\x85\xc0\x78.\x83\xe8\x01\x89\x07\x0f\x84...."
+
+
+def keep_references_on_exception(binary: bytes) -> bytes:
+    """pythonfmu's linux binary with its exception handler no longer releasing the slave.
+
+    ``PySlaveInstance::handle_py_exception``, which turns an exception of the slave into Fatal,
+    first calls ``cleanPyObject()``, which flushes the log and then ``Py_XDECREF``s the slave's
+    class, the slave and its log queue, but leaves the instance holding them and using them on
+    the next call. So every exception takes one reference from each: with a slave that raised
+    three times in one instance (pythonfmu 0.7.0, fmpy) the log queue's count reached zero, and
+    after ten the process died of a segmentation fault. The instance only seemed usable after
+    one exception because the slave's reference cycles kept it alive until the garbage
+    collector ran. The three inlined decrements (the same 78 bytes in pythonfmu 0.7.0 and
+    pythonfmu3 0.3.4) are jumped over: a two-byte ``jmp`` at their start. The log is still
+    flushed, and the references are released once, when the instance is freed. Anything else
+    in the function is an error.
+    """
+    secs = _elf_sections(binary)
+    text = secs[".text"]
+    handlers = [(value, size) for name, value, size in _symbols(binary)
+                if "handle_py_exception" in name and "." not in name and size]
+    if len(handlers) != 1:
+        raise ValueError(f"{len(handlers)} handle_py_exception functions: not a pythonfmu binary this mends")
+    value, size = handlers[0]
+    start = value - text[3] + text[4]
+    found = [m.start() for m in re.finditer(b"(?:" + _INLINED_XDECREF + b"){3}", binary[start:start + size],
+                                            flags=re.DOTALL)]
+    if len(found) != 1:
+        raise ValueError(f"handle_py_exception has {len(found)} runs of three inlined Py_XDECREF: "
+                         "not a pythonfmu binary this mends")
+    data = bytearray(binary)
+    data[start + found[0]:start + found[0] + 2] = bytes([0xEB, 3 * 26 - 2])  # jmp rel8 past the three
     return bytes(data)
 
 

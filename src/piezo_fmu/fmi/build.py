@@ -19,9 +19,15 @@ written with sorted entries, fixed timestamps and modes, stored uncompressed, wi
 ``__pycache__`` (:mod:`piezo_fmu.fmi.archive`). A rebuild from the same sources is byte-identical,
 which is what ``--check`` relies on.
 
-Each FMU carries the core (the ``piezo_fmu`` package, less the build, the slaves and the interfaces it
-lacks: the FMI 2.0 FMU has no Model Exchange) and its slave
-as a top-level module in ``resources/``. At run time it needs only a Python 3 host with numpy.
+Each FMU's linux binary is the project's loader (:mod:`piezo_fmu.fmi.loader`, compiled here: it
+finds a Python for a native host and returns Error for a refused call); pythonfmu's binary,
+mended, is kept beside it as ``<modelIdentifier>.pythonfmu.so``.
+
+Each FMU carries the core (the ``piezo_fmu`` package, less the build, the slaves and the loader's
+sources) and its slave as a top-level module in ``resources/``. At run time it needs a Python 3
+with numpy: the host's, or one the loader finds. Both FMUs carry the same package, Model Exchange
+included: a host process imports ``piezo_fmu`` once, from whichever FMU it loads first, and every
+FMU then runs on that copy.
 """
 
 from __future__ import annotations
@@ -40,11 +46,14 @@ import pythonfmu
 import pythonfmu3
 
 from piezo_fmu.fmi import archive, description
+from piezo_fmu.fmi.loader import install_loader
 from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
-#: Files of the package that no FMU needs at run time (each slave travels as its own module).
-NOT_BUNDLED = frozenset({"fmi/build.py", "fmi/fmi2.py", "fmi/fmi3.py", "fmi/archive.py", "fmi/description.py"})
+#: Files and folders of the package that no FMU needs at run time (each slave travels as its own
+#: module; the loader's sources become the FMUs' linux binary).
+NOT_BUNDLED = frozenset({"fmi/build.py", "fmi/fmi2.py", "fmi/fmi3.py", "fmi/archive.py", "fmi/description.py",
+                         "fmi/loader"})
 
 
 @dataclass(frozen=True)
@@ -62,8 +71,6 @@ class Target:
     identity: str
     capabilities: dict
     variables: tuple
-    #: Modules of the package (beyond :data:`NOT_BUNDLED`) that this FMU's interfaces do not use.
-    unused: frozenset = frozenset()
 
     @property
     def dest(self) -> Path:
@@ -85,7 +92,7 @@ def _pythonfmu3(script: Path, project_files: list[Path], outdir: Path, capabilit
 FMI2 = Target(2, "PiezoImpactDamper", "fmi2.py", "piezo_fmu_slave", _pythonfmu, description.complete_fmi2, "guid",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUstate": True,
                "canSerializeFMUstate": True},
-              VARIABLES, frozenset({"fmi/me.py", "fmi/me_run.py"}))
+              VARIABLES)
 FMI3 = Target(3, "PiezoImpactDamper3", "fmi3.py", "piezo_fmu_slave3", _pythonfmu3, description.complete_fmi3,
               "instantiationToken",
               {"canHandleVariableCommunicationStepSize": True, "canGetAndSetFMUState": True,
@@ -107,7 +114,8 @@ def stage_sources(workdir: Path, target: Target) -> tuple[Path, list[Path]]:
     package = workdir / "piezo_fmu"
     for source in sorted(PACKAGE_DIR.rglob("*.py")):
         relative = source.relative_to(PACKAGE_DIR)
-        if "__pycache__" in relative.parts or relative.as_posix() in NOT_BUNDLED | target.unused:
+        prefixes = {"/".join(relative.parts[:n]) for n in range(1, len(relative.parts) + 1)}
+        if "__pycache__" in relative.parts or prefixes & NOT_BUNDLED:
             continue
         destination = package / relative
         destination.parent.mkdir(parents=True, exist_ok=True)
@@ -129,10 +137,12 @@ def run_builder(target: Target, script: Path, project_files: list[Path], outdir:
 def freeze(raw_fmu: Path, target: Target) -> bytes:
     """The reproducible FMU bytes made from a raw build."""
     files = archive.read_archive(raw_fmu)
+    binary, = [name for name in files if name.startswith(target.linux_binaries) and name.endswith(".so")]
     if target.fmi_version == 2:
-        for name in files:
-            if name.startswith(target.linux_binaries) and name.endswith(".so"):
-                files[name] = archive.drop_exit_unload(files[name])
+        files[binary] = archive.drop_exit_unload(files[binary])
+    files[binary] = archive.keep_references_on_exception(files[binary])
+    # the slave's class names the binary: the target's model, or a benchmark's floor
+    files = install_loader(files, target.fmi_version, Path(binary).stem)
     root = target.complete(files["modelDescription.xml"], target.variables, target.capabilities)
     identity = archive.content_identity(files, description.xml_bytes(root))
     root.set(target.identity, identity)
