@@ -8,8 +8,9 @@ past it, or of a size that is not positive, is refused); the output ``y = gain *
 module, so that two FMUs show whether they share one), and ``references``, the slave's
 reference count (what pythonfmu's exception handler used to take away).
 ``exit_initialization_mode`` logs an information message (status OK, category ``logAll``).
-Refusals raise ``PiezoFmuRefusal``, defined here as the project defines it: the loader knows it
-by its name.
+A refusal is what the project's slaves do: the reason logged with the error status, and the call
+returns (a step returns False); the loader turns it into the error status of that call. The value
+13 raises a plain RuntimeError instead: an unexpected failure, which pythonfmu makes Fatal.
 """
 
 SLAVE_2 = "LoaderTest2"
@@ -18,10 +19,6 @@ SLAVE_3 = "LoaderTest3"
 COMMON = '''
 import math
 import sys
-
-
-class PiezoFmuRefusal(ValueError):
-    """A call the FMU refuses (the project's exception, by name)."""
 
 
 def count_instance():
@@ -38,30 +35,35 @@ class Behaviour:
         if value == 13.0:
             raise RuntimeError("a plain failure, not a refusal")
         if not (math.isfinite(value) and value >= 0.0):
-            raise PiezoFmuRefusal(f"gain = {value!r} is out of range; allowed range [0, inf)")
+            self.log(f"gain = {value!r} is out of range; allowed range [0, inf)", self.ERROR)
+            return
         self.gain = value
 
     def check_start_values(self):
         if self.m == 13.0:
             raise RuntimeError("a plain failure, not a refusal")
         if not self.m > 0.0:
-            raise PiezoFmuRefusal(f"invalid start values: m = {self.m!r} kg is out of range; allowed range (0, inf)")
+            self.log(f"invalid start values: m = {self.m!r} kg is out of range; allowed range (0, inf)", self.ERROR)
+            return
         self.log("start values checked", self.OK, "logAll")
 
     def step(self, current_time, step_size):
         if not step_size > 0.0:
-            raise PiezoFmuRefusal(f"step size = {step_size!r} s is out of range; allowed range (0, inf)")
+            self.log(f"step size = {step_size!r} s is out of range; allowed range (0, inf)", self.ERROR)
+            return False
         end = current_time + step_size
         if end > self.t_max:  # a message with quotes and a percent sign, as some have
-            raise PiezoFmuRefusal(f"the step to t = {end!r} s passes t_max = {self.t_max!r} s, "
-                                  f"{100 * end / self.t_max:.0f} % of 't_max'")
+            self.log(f"the step to t = {end!r} s passes t_max = {self.t_max!r} s, "
+                     f"{100 * end / self.t_max:.0f} % of 't_max'", self.ERROR)
+            return False
         self.time = end
         self.y = self.gain * self.time
+        return True
 '''
 
 SLAVE = '''
 class {name}(Behaviour, {base}):
-    OK = {status}.ok
+    OK, ERROR = {status}.ok, {status}.error
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -78,8 +80,7 @@ class {name}(Behaviour, {base}):
         self.check_start_values()
 
     def do_step(self, current_time, step_size):
-        self.step(current_time, step_size)
-        return True
+        return self.step(current_time, step_size)
 '''
 
 SOURCE_2 = COMMON + """

@@ -7,7 +7,6 @@ Every behaviour is checked on ``fmus/PiezoImpactDamper.fmu`` itself, against the
 from __future__ import annotations
 
 import csv
-import io
 import itertools
 import json
 import math
@@ -15,7 +14,6 @@ import os
 import subprocess
 import sys
 import sysconfig
-import zipfile
 from ctypes import byref
 from pathlib import Path
 
@@ -23,9 +21,8 @@ import pytest
 from fmpy import calloc, extract, free, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Discard, fmi2Error)
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Error)
 from fmpy.logging import addLoggerProxy
-from fmpy.validation import validate_fmu
 
 from piezo_fmu import Parameters, Simulator, parameter_info
 from piezo_fmu.fmi import build as fmu_build
@@ -361,18 +358,21 @@ def run_outputs(host: Host, t_from: float, t_to: float, h: float) -> list[dict]:
 
 @pytest.mark.parametrize("call, message", [
     (lambda fmu, out: fmu.setReal([out], [1.0]), "main_displacement (valueReference={out}, causality output) cannot be set"),
-    (lambda fmu, out: fmu.getInteger([out]), "valueReference={out} is not of type Integer"),
+    (lambda fmu, out: fmu.getInteger([out]), "main_displacement (valueReference={out}) is of type Real, not Integer"),
     (lambda fmu, out: fmu.getReal([9999]), "no variable has valueReference=9999"),
-    (lambda fmu, out: fmu.getBoolean([out]), "valueReference={out} is not of type Boolean"),
+    (lambda fmu, out: fmu.getBoolean([out]), "main_displacement (valueReference={out}) is of type Real, not Boolean"),
 ], ids=["set an output", "an Integer read of a Real", "an unknown reference", "a Boolean read"])
-def test_a_wrong_access_gets_a_non_ok_status_and_a_message_naming_it(unzipdir, model_description, call, message):
+def test_a_wrong_access_is_an_error_from_that_call_with_a_message_naming_it(unzipdir, model_description, call, message):
     # The slave's own accessors (pythonfmu's variable objects are made for the model description
-    # only): what pythonfmu's accessors refuse, they refuse, and the process goes on.
+    # only): what pythonfmu's accessors refuse, they refuse, as an error, and the process goes on.
     host = Host(unzipdir, model_description)
     out = host.variables["main_displacement"].valueReference
-    with pytest.raises(FMICallException):
+    with pytest.raises(FMICallException) as refused:
         call(host.fmu, out)
-    assert any(message.format(out=out) in text for status, text in host.messages if status >= fmi2Error), host.messages
+    assert refused.value.status == fmi2Error
+    assert any(message.format(out=out) in text for status, text in host.messages if status == fmi2Error), host.messages
+    host.step(1e-3)  # the instance goes on
+    assert math.isfinite(host.outputs()["main_displacement"])
     again = Host(unzipdir, model_description)  # a new instance in the same process works
     again.step(1e-3)
     assert math.isfinite(again.outputs()["main_displacement"])
@@ -452,47 +452,64 @@ def run_outputs_from(host: Host, k: int, h: float) -> list[dict]:
     ({"barrier_mode": 2}, "barrier_mode"),
     ({"M": 1e-3}, "M"),
 ])
-def test_bad_parameter_is_logged_by_name_and_the_first_step_is_refused(unzipdir, model_description, values, name):
-    host = Host(unzipdir, model_description, start_values=values)
-    assert any(f"{name} = " in message for message in host.errors()), host.messages
+def test_bad_parameter_is_an_error_from_exit_initialization_named_and_reset_recovers(unzipdir, model_description,
+                                                                                       values, name):
+    fmu, instance = instantiate(unzipdir, model_description)
+    host = Host.__new__(Host)  # the log of this instance, read as Host reads it
+    host.fmu, host.name = fmu, instance
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    set_values(fmu, {v.name: v for v in model_description.modelVariables}, **values)
     with pytest.raises(FMICallException) as refused:
-        host.step(1e-3)
-    assert refused.value.status == fmi2Discard
-    assert math.isnan(host.outputs()["main_displacement"])
-    host.close()
-    # The host process goes on and can instantiate again.
-    good = Host(unzipdir, model_description)
-    good.step(1e-3)
-    assert good.errors() == []
-    good.close()
+        fmu.exitInitializationMode()
+    assert refused.value.status == fmi2Error
+    assert any(f"{name} = " in message for message in host.errors()), host.messages
+    with pytest.raises(FMICallException) as step_refused:  # the instance is in its error state
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    assert step_refused.value.status == fmi2Error
+    fmu.reset()  # the same instance, back to the default start values
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    assert math.isfinite(read_outputs(fmu, {v.name: v for v in model_description.modelVariables})["main_displacement"])
+    fmu.terminate()
+    fmu.freeInstance()
 
 
 @pytest.mark.parametrize("inputs", [
     {"base_displacement": math.nan}, {"base_displacement": math.inf}, {"base_velocity": -math.inf},
     {"base_velocity": math.nan},
 ])
-def test_non_finite_input_is_refused_and_the_instance_recovers(unzipdir, model_description, inputs):
+def test_a_non_finite_input_is_an_error_from_the_setter_and_changes_nothing(unzipdir, model_description, inputs):
     host = Host(unzipdir, model_description)
     reference = Host(unzipdir, model_description)
     run_outputs(host, 0.0, 0.1, 1e-3)
     expected = run_outputs(reference, 0.0, 0.2, 1e-3)[-1]
-    host.set(**inputs)
     with pytest.raises(FMICallException) as refused:
-        host.fmu.doStep(currentCommunicationPoint=0.1, communicationStepSize=1e-3)
-    assert refused.value.status == fmi2Discard
-    assert any("not finite" in message for message in host.errors()), host.messages
-    host.set(base_displacement=0.0, base_velocity=0.0)
-    assert run_outputs(host, 0.1, 0.2, 1e-3)[-1] == expected  # the refused step changed nothing
+        host.set(**inputs)
+    assert refused.value.status == fmi2Error
+    name, = inputs
+    assert any(f"{name} = " in message and "is not finite; allowed range (-inf, inf)" in message
+               for message in host.errors()), host.messages
+    assert run_outputs(host, 0.1, 0.2, 1e-3)[-1] == expected  # the refused value changed nothing
     host.close()
     reference.close()
 
 
-def test_non_finite_input_at_initialization_is_refused(unzipdir, model_description):
-    host = Host(unzipdir, model_description, inputs={"base_displacement": math.nan})
-    assert any("base_displacement = nan" in message for message in host.errors()), host.messages
-    with pytest.raises(FMICallException):
-        host.step(1e-3)
-    host.close()
+def test_a_non_finite_parameter_is_an_error_from_the_setter_naming_its_range(unzipdir, model_description):
+    fmu, instance = instantiate(unzipdir, model_description)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    with pytest.raises(FMICallException) as refused:
+        set_values(fmu, {v.name: v for v in model_description.modelVariables}, m=math.nan)
+    assert refused.value.status == fmi2Error
+    assert any(message == "m = nan is not finite; allowed range (0, inf) kg"
+               for entry, status, message in LOG if entry == instance and status == fmi2Error)
+    fmu.exitInitializationMode()  # the default m holds
+    fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    fmu.terminate()
+    fmu.freeInstance()
 
 
 @pytest.mark.parametrize("current, step, words", [
@@ -509,20 +526,24 @@ def test_bad_step_is_refused_and_the_instance_recovers(unzipdir, model_descripti
     expected = run_outputs(reference, 0.0, 0.2, 1e-3)[-1]
     with pytest.raises(FMICallException) as refused:
         host.fmu.doStep(currentCommunicationPoint=current, communicationStepSize=step)
-    assert refused.value.status == fmi2Discard
+    assert refused.value.status == fmi2Error
     assert any(words in message for message in host.errors()), host.messages
     assert run_outputs(host, 0.1, 0.2, 1e-3)[-1] == expected
     host.close()
     reference.close()
 
 
-def test_setting_a_parameter_after_initialization_is_an_error(unzipdir, model_description):
+def test_setting_a_parameter_after_initialization_is_an_error_from_the_setter(unzipdir, model_description):
     host = Host(unzipdir, model_description)
     host.step(1e-3)
-    host.set(m=0.5)
-    assert any("parameter m" in message for message in host.errors()), host.messages
-    with pytest.raises(FMICallException):
+    with pytest.raises(FMICallException) as refused:
+        host.set(m=0.5)
+    assert refused.value.status == fmi2Error
+    assert any("parameter m is fixed: it cannot be set to 0.5 after initialization" in message
+               for message in host.errors()), host.messages
+    with pytest.raises(FMICallException):  # the instance is in its error state until a reset
         host.step(1e-3)
+    host.set(m=0.1)  # setting the value it has is no change, hence no error
     host.close()
 
 

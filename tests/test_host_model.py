@@ -117,7 +117,7 @@ def test_c_host_reports_fmu_errors_with_status_1(host, tmp_path, start_value, wo
     and never NaN output with exit status 0: the host treats any status but OK as an error."""
     with pytest.raises(subprocess.CalledProcessError) as failure:
         native.run(FMU, tmp_path / "bad.csv", ["--stop", "0.01", "--set", start_value], executable=host)
-    assert failure.value.returncode == 1 and "fmi2DoStep returned Discard" in failure.value.stderr
+    assert failure.value.returncode == 1 and "fmi2ExitInitializationMode returned Error (3)" in failure.value.stderr
     assert f"invalid start values: {words}" in failure.value.stderr  # the FMU's own message
 
 

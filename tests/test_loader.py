@@ -19,7 +19,6 @@ loader as the project's builds give it.
 from __future__ import annotations
 
 import ctypes
-import os
 import subprocess
 import sys
 import time
@@ -277,16 +276,18 @@ def test_in_fmpy_any_other_exception_stays_fatal(tiny, tmp_path, version):
 
 
 @pytest.mark.parametrize("version", [2, 3])
-def test_an_instance_keeps_its_references_through_any_number_of_refusals(tiny, tmp_path, version):
+def test_an_instance_keeps_its_references_through_refusals_and_exceptions(tiny, tmp_path, version):
     """pythonfmu's exception handler released the slave, its class and its log queue at every
     exception while the instance kept using them (see ``piezo_fmu.fmi.archive.keep_references_on_exception``;
-    shown below on the binary as shipped): three refusals emptied the log queue's count, ten
-    crashed the process. The build mends the binary: 100 refusals, a garbage collection, a reset
+    shown below on the binary as shipped): three exceptions emptied the log queue's count, ten
+    crashed the process. The project's slaves raise none (a refusal is logged), and the build mends
+    the binary for what else might: 100 refusals and 100 exceptions, a garbage collection, a reset
     and a run, and the slave's reference count has not moved."""
     fmu = Tiny(tiny[version], tmp_path / "fmu")
     before = fmu.get("references")
     for _ in range(100):
         assert fmu.refused(fmu.set, "gain", -1.0) == ERROR
+        assert fmu.refused(fmu.set, "gain", 13.0) == FATAL
     import gc
 
     gc.collect()
@@ -309,11 +310,11 @@ def in_child(code: str, *args: str) -> str:
 
 @pytest.mark.parametrize("version", [2, 3])
 def test_pythonfmus_binary_as_shipped_drops_a_reference_at_every_exception(tmp_path, version):
-    """Two refusals take two references from the slave (and from its class and its log queue,
+    """Two exceptions take two references from the slave (and from its class and its log queue,
     which the process then frees too early: the child leaves at once)."""
     fmu = build_tiny(version, tmp_path / "build", mend_references=False)
     code = ("import os; fmu = Tiny(Path(sys.argv[2]), Path(sys.argv[3])); before = fmu.get('references')\n"
-            "for _ in range(2): fmu.refused(fmu.set, 'gain', -1.0)\n"
+            "for _ in range(2): fmu.refused(fmu.set, 'gain', 13.0)\n"
             "print(before - fmu.get('references'), flush=True); os._exit(0)")
     assert in_child(code, str(fmu), str(tmp_path / "fmu")) == "2"
 

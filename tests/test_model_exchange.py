@@ -29,6 +29,7 @@ import sys
 
 import numpy as np
 import pytest
+from fmpy.fmi1 import FMICallException
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Model
 
@@ -251,14 +252,14 @@ def test_model_exchange_runs_in_a_process_that_loaded_the_fmi2_fmu_first():
                                            ({"voltage_model": 7}, "voltage_model = 7 is not allowed")])
 def test_a_bad_start_value_is_named_and_the_run_stops_at_the_initial_update(values, words):
     log = []
-    with pytest.raises(Exception, match="termination during initial event update"):
+    with pytest.raises(FMICallException, match="fmi3ExitInitializationMode failed with status 3"):
         simulate_fmu(str(FMU3), fmi_type="ModelExchange", stop_time=0.1, start_values=values,
                      logger=lambda env, status, category, message: log.append((status, message.decode())))
     gc.collect()  # an exception through pythonfmu3's binary would crash here
     assert any(status == 3 and words in message for status, message in log), log
 
 
-def test_a_fixed_parameter_set_later_is_refused_and_stops_the_run(tmp_path):
+def test_a_fixed_parameter_set_later_is_an_error_from_the_setter_and_the_run_stops(tmp_path):
     log = []
     md = read_model_description(str(FMU3))
     fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(FMU3), unzipdir=str(tmp_path)),
@@ -270,9 +271,13 @@ def test_a_fixed_parameter_set_later_is_refused_and_stops_the_run(tmp_path):
     fmu.enterContinuousTimeMode()
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu.setTime(0.01)
-    fmu.setFloat64([vr["M"]], [2.0])
+    with pytest.raises(FMICallException) as refused:  # the loader: the setter's own status
+        fmu.setFloat64([vr["M"]], [2.0])
+    assert refused.value.status == 3
     fmu.enterEventMode()
-    assert fmu.updateDiscreteStates()[1] is True  # terminateSimulation
+    with pytest.raises(FMICallException) as stopped:  # the instance stays in its error state
+        fmu.updateDiscreteStates()
+    assert stopped.value.status == 3
     gc.collect()
     assert any(status == 3 and "parameter M is fixed" in message for status, message in log), log
     assert math.isfinite(fmu.getFloat64([vr["main_displacement"]])[0])

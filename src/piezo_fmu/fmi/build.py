@@ -138,9 +138,7 @@ def freeze(raw_fmu: Path, target: Target) -> bytes:
     """The reproducible FMU bytes made from a raw build."""
     files = archive.read_archive(raw_fmu)
     binary, = [name for name in files if name.startswith(target.linux_binaries) and name.endswith(".so")]
-    if target.fmi_version == 2:
-        files[binary] = archive.drop_exit_unload(files[binary])
-    files[binary] = archive.keep_references_on_exception(files[binary])
+    files[binary] = archive.keep_references_on_exception(archive.drop_exit_unload(files[binary]))
     # the slave's class names the binary: the target's model, or a benchmark's floor
     files = install_loader(files, target.fmi_version, Path(binary).stem)
     root = target.complete(files["modelDescription.xml"], target.variables, target.capabilities)

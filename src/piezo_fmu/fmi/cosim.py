@@ -15,7 +15,7 @@ import math
 from math import isfinite
 from typing import Callable, Optional
 
-from piezo_fmu import Parameters, Simulator
+from piezo_fmu import Parameters, Simulator, parameter_info
 from piezo_fmu.solver import READINGS
 from piezo_fmu.fmi.variables import BY_NAME, VARIABLES
 
@@ -50,6 +50,38 @@ _FROM_CORE = frozenset(_BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParame
 #: Output and calculated values while there is no core (bad start values): NaN, and 0 for the Integer.
 _NO_CORE = tuple((vr, 0 if VARIABLES[vr].type == "Integer" else math.nan)
                  for vr in _BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
+
+
+#: The table's types as each FMI version names them.
+TYPE_NAMES = {2: {"Real": "Real", "Integer": "Integer"}, 3: {"Real": "Float64", "Integer": "Int32"}}
+
+
+def type_problem(vrs, kind: str, names: dict, variables=VARIABLES) -> Optional[str]:
+    """Why ``vrs`` are not all value references of ``variables`` (the table by default) of the
+    table's type ``kind`` ("Real", "Integer", or the name of a type it has none of), or None;
+    types named as ``names`` (:data:`TYPE_NAMES`) says."""
+    for vr in vrs:
+        if not 0 <= vr < len(variables):
+            return f"no variable has valueReference={vr}"
+        if variables[vr].type != kind:
+            return (f"variable {variables[vr].name} (valueReference={vr}) is of type {names[variables[vr].type]}, "
+                    f"not {names.get(kind, kind)}")
+    return None
+
+
+def no_values(vrs, kind: str) -> list:
+    """What a refused get returns: NaN for the table's Real variables, 0 for any other type."""
+    return [math.nan if kind == "Real" else 0] * len(vrs)
+
+
+def _allowed_ranges() -> dict:
+    """The allowed range of each Real parameter and input, by value reference, with its unit."""
+    bounds = parameter_info()
+    return {vr: f"{bounds[spec.name]['bound'].describe() if spec.name in bounds else '(-inf, inf)'} {spec.unit}"
+            for vr, spec in enumerate(VARIABLES) if spec.causality in ("parameter", "input") and spec.type == "Real"}
+
+
+_ALLOWED = _allowed_ranges()
 
 
 def publish(now: list, readings) -> None:
@@ -125,17 +157,22 @@ class CoSimulation:
         return [now[vr] for vr in vrs]
 
     def set(self, vrs, values) -> None:
-        """Set the variables ``vrs`` (value references, already checked for their type)."""
+        """Set the table's variables ``vrs`` (value references, already checked for their type). A
+        variable that cannot be set, a non-finite Real, or a parameter after initialization is
+        refused: logged, and not set."""
         for vr, value in zip(vrs, values):
             spec = VARIABLES[vr]
-            if spec.causality == "parameter":
+            if spec.causality not in ("parameter", "input"):
+                self._log_error(f"set: variable {spec.name} (valueReference={vr}, causality {spec.causality}) "
+                                "cannot be set")
+            elif spec.type == "Real" and not isfinite(value):
+                self._log_error(f"{spec.name} = {value!r} is not finite; allowed range {_ALLOWED[vr]}")
+            elif spec.causality == "parameter":
                 self._set_parameter(vr, value)
-            elif spec.causality == "input":
+            else:
                 self.now[vr] = value
                 if not self._stepping:
                     self._start_values_changed()  # the inputs at the start time are the core's initial base
-            else:
-                raise TypeError(f"variable {spec.name} (valueReference={vr}, causality {spec.causality}) cannot be set")
 
     def _set_parameter(self, vr: int, value) -> None:
         if self._stepping:

@@ -38,11 +38,9 @@ from pythonfmu3 import (CoSimulation, DefaultExperiment, Fmi3Causality, Fmi3Slav
 from pythonfmu3.enums import Fmi3Initial
 
 from piezo_fmu.fmi import cosim, me
-from piezo_fmu.fmi.cosim import guarded
+from piezo_fmu.fmi.cosim import TYPE_NAMES, guarded, no_values, type_problem
 from piezo_fmu.fmi.variables import FMI3_VARIABLES, INDICATORS, STATES, VARIABILITY, VARIABLES, Variable
 
-#: FMI 3.0 types of the table's FMI 2.0 types.
-FMI3_TYPES = {"Real": "Float64", "Integer": "Int32"}
 #: The value reference of the independent variable, after the table; the locals follow it.
 TIME = len(VARIABLES)
 #: The value references of each FMI 2.0 type, over every variable of the FMI 3.0 FMU.
@@ -65,19 +63,6 @@ def model_variable(spec: Variable, getter, setter=None, derivative=None):
     if spec.type == "Integer":
         return Int32(spec.name, **kwargs)
     return Float64(spec.name, derivative=derivative, **kwargs)
-
-
-def type_problem(vrs, kind: str) -> str | None:
-    """Why ``vrs`` are not all variables of the FMI 2.0 type ``kind``, or None."""
-    if REFERENCES.get(kind, frozenset()).issuperset(vrs):
-        return None
-    for vr in vrs:
-        if not 0 <= vr < len(FMI3_VARIABLES):
-            return f"no variable has valueReference={vr}"
-        if FMI3_VARIABLES[vr].type != kind:
-            return (f"variable {FMI3_VARIABLES[vr].name} (valueReference={vr}) is of type "
-                    f"{FMI3_TYPES.get(FMI3_VARIABLES[vr].type)}, not {FMI3_TYPES.get(kind, kind)}")
-    return None
 
 
 def update_result(update: me.Update) -> Fmi3UpdateDiscreteStatesResult:
@@ -149,10 +134,10 @@ class PiezoImpactDamper3(Fmi3SlaveBase, ModelExchange, CoSimulation):
         return self._values([vr], FMI3_VARIABLES[vr].type)[0]
 
     def _values(self, vrs: List[int], kind: str) -> list:
-        problem = type_problem(vrs, kind) if kind else "no variable has this type"
+        problem = type_problem(vrs, kind, TYPE_NAMES[3], FMI3_VARIABLES)
         if problem is not None:
             self._refuse(f"get: {problem}")
-            return _no_values(vrs, kind)
+            return no_values(vrs, kind)
         source = self._me if self._mode == MODEL_EXCHANGE else self._cosim
         if TABLE.issuperset(vrs):
             return source.get(vrs)
@@ -161,7 +146,7 @@ class PiezoImpactDamper3(Fmi3SlaveBase, ModelExchange, CoSimulation):
         return [source.get([vr])[0] if vr < TIME else self._time() if vr == TIME else next(local) for vr in vrs]
 
     def _assign(self, vrs: List[int], values: list, kind: str) -> None:
-        problem = type_problem(vrs, kind) if kind else "no variable has this type"
+        problem = type_problem(vrs, kind, TYPE_NAMES[3], FMI3_VARIABLES)
         if problem is None:
             fixed = [vr for vr in vrs if FMI3_VARIABLES[vr].causality not in ("parameter", "input")]
             if fixed:
@@ -173,11 +158,11 @@ class PiezoImpactDamper3(Fmi3SlaveBase, ModelExchange, CoSimulation):
             return
         self._cosim.set(vrs, values)
 
-    @guarded(lambda vrs: _no_values(vrs, "Real"))
+    @guarded(lambda vrs: no_values(vrs, "Real"))
     def get_float64(self, vrs: List[int]) -> List[float]:
         return self._values(vrs, "Real")
 
-    @guarded(lambda vrs: _no_values(vrs, "Integer"))
+    @guarded(lambda vrs: no_values(vrs, "Integer"))
     def get_int32(self, vrs: List[int]) -> List[int]:
         return self._values(vrs, "Integer")
 
@@ -189,37 +174,37 @@ class PiezoImpactDamper3(Fmi3SlaveBase, ModelExchange, CoSimulation):
     def set_int32(self, vrs: List[int], values: List[int]):
         self._assign(vrs, values, "Integer")
 
-    @guarded(lambda vrs: _no_values(vrs, ""))
+    @guarded(lambda vrs: no_values(vrs, "Int64"))
     def get_int64(self, vrs):
-        return self._values(vrs, "")
+        return self._values(vrs, "Int64")
 
-    @guarded(lambda vrs: _no_values(vrs, ""))
+    @guarded(lambda vrs: no_values(vrs, "UInt64"))
     def get_uint64(self, vrs):
-        return self._values(vrs, "")
+        return self._values(vrs, "UInt64")
 
-    @guarded(lambda vrs: _no_values(vrs, ""))
+    @guarded(lambda vrs: no_values(vrs, "Boolean"))
     def get_boolean(self, vrs):
-        return self._values(vrs, "")
+        return self._values(vrs, "Boolean")
 
-    @guarded(lambda vrs: _no_values(vrs, ""))
+    @guarded(lambda vrs: no_values(vrs, "String"))
     def get_string(self, vrs):
-        return self._values(vrs, "")
+        return self._values(vrs, "String")
 
     @guarded(lambda vrs, values: None)
     def set_int64(self, vrs, values):
-        self._assign(vrs, values, "")
+        self._assign(vrs, values, "Int64")
 
     @guarded(lambda vrs, values: None)
     def set_uint64(self, vrs, values):
-        self._assign(vrs, values, "")
+        self._assign(vrs, values, "UInt64")
 
     @guarded(lambda vrs, values: None)
     def set_boolean(self, vrs, values):
-        self._assign(vrs, values, "")
+        self._assign(vrs, values, "Boolean")
 
     @guarded(lambda vrs, values: None)
     def set_string(self, vrs, values):
-        self._assign(vrs, values, "")
+        self._assign(vrs, values, "String")
 
     # -- life cycle -----------------------------------------------------------------------------
 
@@ -290,7 +275,3 @@ class PiezoImpactDamper3(Fmi3SlaveBase, ModelExchange, CoSimulation):
         if state["model_exchange"] is not None:
             self._me.set_state(state["model_exchange"])
 
-
-def _no_values(vrs, kind: str) -> list:
-    """What a refused get returns: NaN for Float64, 0 for the other types."""
-    return [math.nan if kind == "Real" else 0] * len(vrs)

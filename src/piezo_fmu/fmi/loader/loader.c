@@ -18,11 +18,12 @@
  *      packages are found).
  *    When none is usable, instantiation returns NULL after a message through the host's logger
  *    that says what was tried and what to set. Nothing goes to stdout or stderr.
- * 2. Statuses. pythonfmu's binary turns any exception of the slave into Fatal. The slave raises
- *    PiezoFmuRefusal for a call it refuses; the loader gives pythonfmu its own logger, and when a
- *    call returns Fatal with that exception's message logged during the call, the call returns
- *    Error instead and the host's logger gets the refusal's own text with status Error. Every
- *    other Fatal stays Fatal.
+ * 2. Statuses. pythonfmu's binary returns only OK, Discard (a step that returns False) or Fatal
+ *    (an exception). The slaves never raise: a call they refuse logs its reason with the error
+ *    status and returns, and something unexpected is logged with the fatal status. The loader
+ *    gives pythonfmu its own logger and returns, from every forwarded call, the worst of the
+ *    status pythonfmu returned and the statuses of the messages logged during the call: a
+ *    refused setter, ExitInitializationMode or step returns Error from that very call.
  * 3. Logging. pythonfmu 0.7.0 sends nothing to the logger, its Fatal messages included, unless
  *    debug logging is on (and pythonfmu3 filters Fatal messages by category). pythonfmu always
  *    runs with debug logging on; the loader passes on every message of status Warning or worse,
@@ -72,8 +73,6 @@ typedef fmi3Status Status;
 
 extern char **environ;
 
-/* The repr of the project's refusal exception, as pythonfmu logs it. */
-#define REFUSAL "PiezoFmuRefusal("
 /* pythonfmu's binary, beside this one: <modelIdentifier>.so -> <modelIdentifier>.pythonfmu.so */
 #define REAL_SUFFIX ".pythonfmu.so"
 #define DEFAULT_TIMEOUT_S 30.0
@@ -93,7 +92,7 @@ typedef struct {
     int debug_logging;
     size_t ncategories;
     char **categories;
-    char *refusal; /* the refusal message pythonfmu logged during the current call */
+    Status logged; /* the worst status of the messages logged during the current call */
 } Instance;
 
 static Status finish(Instance *in, Status status);
@@ -138,19 +137,12 @@ static int category_enabled(const Instance *in, const char *category)
     return 0;
 }
 
-/* A message of pythonfmu's binary: a refusal is kept for finish(); the rest goes to the host. */
+/* A message of pythonfmu's binary: its status is kept for finish(), and it goes to the host. */
 static void relay_message(Instance *in, Status status, const char *category, const char *message)
 {
     if (!in || !message) return;
     category = category ? category : "";
-    if (status == STATUS_FATAL && strstr(message, REFUSAL)) {
-        char *copy = strdup(message);
-        if (copy) {
-            free(in->refusal);
-            in->refusal = copy;
-            return;
-        }
-    }
+    if (status > in->logged) in->logged = status;
     if (status != STATUS_OK || (in->debug_logging && category_enabled(in, category)))
         to_host(in, status, category, message);
 }
@@ -171,93 +163,12 @@ static void relay(fmi3InstanceEnvironment environment, fmi3Status status, fmi3St
 }
 #endif
 
-/* Append code point cp to out as UTF-8. */
-static char *put_utf8(char *out, unsigned long cp)
-{
-    if (cp < 0x80) {
-        *out++ = (char)cp;
-    } else if (cp < 0x800) {
-        *out++ = (char)(0xC0 | (cp >> 6));
-        *out++ = (char)(0x80 | (cp & 0x3F));
-    } else if (cp < 0x10000) {
-        *out++ = (char)(0xE0 | (cp >> 12));
-        *out++ = (char)(0x80 | ((cp >> 6) & 0x3F));
-        *out++ = (char)(0x80 | (cp & 0x3F));
-    } else {
-        *out++ = (char)(0xF0 | (cp >> 18));
-        *out++ = (char)(0x80 | ((cp >> 12) & 0x3F));
-        *out++ = (char)(0x80 | ((cp >> 6) & 0x3F));
-        *out++ = (char)(0x80 | (cp & 0x3F));
-    }
-    return out;
-}
-
-/* The refusal's own text: the first Python string literal of "PiezoFmuRefusal('...')" in a
- * pythonfmu message, unescaped, newly allocated; NULL if the message has no such literal. */
-static char *refusal_text(const char *message)
-{
-    const char *p = strstr(message, REFUSAL);
-    if (!p) return NULL;
-    p += strlen(REFUSAL);
-    char quote = *p;
-    if (quote != '\'' && quote != '"') return NULL;
-    char *text = malloc(strlen(p) + 1); /* no escape is longer in UTF-8 than as written */
-    if (!text) return NULL;
-    char *o = text;
-    for (p++; *p && *p != quote; p++) {
-        if (*p != '\\') {
-            *o++ = *p;
-            continue;
-        }
-        switch (*++p) {
-        case 'n': *o++ = '\n'; break;
-        case 't': *o++ = '\t'; break;
-        case 'r': *o++ = '\r'; break;
-        case '\\': case '\'': case '"': *o++ = *p; break;
-        case 'x': case 'u': case 'U': {
-            int digits = *p == 'x' ? 2 : *p == 'u' ? 4 : 8;
-            unsigned long cp = 0;
-            for (int i = 0; i < digits; i++) {
-                char c = *++p;
-                int v = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
-                if (v < 0) {
-                    free(text);
-                    return NULL;
-                }
-                cp = cp * 16 + (unsigned long)v;
-            }
-            o = put_utf8(o, cp);
-            break;
-        }
-        default:
-            free(text);
-            return NULL;
-        }
-    }
-    if (*p != quote) {
-        free(text);
-        return NULL;
-    }
-    *o = '\0';
-    return text;
-}
-
-/* The status of a forwarded call: Fatal with a refusal logged during the call becomes Error. */
+/* The status of a forwarded call: the worst of what pythonfmu returned and what was logged. */
 static Status finish(Instance *in, Status status)
 {
-    char *refusal = in->refusal;
-    if (!refusal) return status;
-    in->refusal = NULL;
-    if (status == STATUS_FATAL) {
-        char *text = refusal_text(refusal);
-        to_host(in, STATUS_ERROR, "logStatusError", text ? text : refusal);
-        free(text);
-        status = STATUS_ERROR;
-    } else {
-        to_host(in, STATUS_FATAL, "logStatusFatal", refusal);
-    }
-    free(refusal);
-    return status;
+    Status logged = in->logged;
+    in->logged = STATUS_OK;
+    return logged > status ? logged : status;
 }
 
 static Status unsupported(Instance *in, const char *function)
@@ -556,7 +467,6 @@ static void free_instance(Instance *in)
     if (!in) return;
     for (size_t i = 0; i < in->ncategories; i++) free(in->categories[i]);
     free(in->categories);
-    free(in->refusal);
 #if FMI_VERSION == 2
     free(in->name);
 #endif
@@ -604,10 +514,10 @@ static void release(Instance *in, int index)
     free_instance(in);
 }
 
-/* After pythonfmu's instantiate: a refusal it logged is said as an error; NULL frees ours. */
+/* After pythonfmu's instantiate: NULL frees ours. */
 static void *instantiated(Instance *in)
 {
-    finish(in, STATUS_FATAL);
+    finish(in, STATUS_OK);
     if (in->real) return in;
     free_instance(in);
     return NULL;
