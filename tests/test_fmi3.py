@@ -240,3 +240,52 @@ def test_a_wrong_access_is_an_error_and_never_damages_the_process(fmus):
 
 def _time(host: Host) -> float:
     return host.fmu.getFloat64([host.variables["time"].valueReference])[0]
+
+
+EARLY_SLAVE = '''
+from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Status, Fmi3StepResult, Fmi3Variability, Float64
+
+
+class EarlyReturn(Fmi3Slave):
+    """Stops a step at t = 0.35 (a contact onset, say) and asks for an FMI 3.0 early return."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.time = 0.0
+        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
+                                       variability=Fmi3Variability.continuous))
+
+    def do_step(self, current_time, step_size):
+        if current_time < 0.35 < current_time + step_size:
+            self.time = 0.35
+            # (Fmi3StepResult has no lastSuccessfulTime field to say where.)
+            return Fmi3StepResult(status=Fmi3Status.ok, eventHandlingNeeded=True, earlyReturn=True)
+        self.time = current_time + step_size
+        return Fmi3StepResult()
+'''
+
+
+def test_pythonfmu3_cannot_return_early(tmp_path):
+    """The reproducer behind the FMUs' "no early return": a pythonfmu3 slave that stops a step at
+    0.35 s and returns ``earlyReturn=True`` is reported by the binary as having completed the whole
+    step. pythonfmu3 0.3.4's fmi3DoStep passes only (current time, step size) to Python, never
+    reads earlyReturn or eventHandlingNeeded from its result, and sets lastSuccessfulTime to the
+    end of the step on OK; the instantiation's earlyReturnAllowed never reaches Python. So the
+    damper's FMI 3.0 co-simulation locates its contacts inside each step, as FMI 2.0's does."""
+    from pythonfmu3 import FmuBuilder
+
+    script = tmp_path / "early_return.py"
+    script.write_text(EARLY_SLAVE)
+    fmu_path = FmuBuilder.build_FMU(script, dest=tmp_path, canHandleVariableCommunicationStepSize=True)
+    md = read_model_description(str(fmu_path))
+    fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(fmu_path), unzipdir=str(tmp_path / "x")),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="early")
+    fmu.instantiate(eventModeUsed=True, earlyReturnAllowed=True, logMessage=lambda *args: None)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    event, terminate, early, last = fmu.doStep(0.3, 0.1)
+    slave_time = fmu.getFloat64([md.modelVariables[0].valueReference])[0]
+    assert slave_time == 0.35  # where the slave stopped
+    assert (event, terminate, early, last) == (False, False, False, 0.3 + 0.1)  # what the host is told
+    fmu.terminate()
+    fmu.freeInstance()
