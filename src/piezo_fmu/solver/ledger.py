@@ -81,13 +81,17 @@ class EnergyLedger(NamedTuple):
         return self.totals()[1]
 
     def totals(self) -> tuple[float, float, float]:
-        """:attr:`dissipated`, :attr:`balance_error` and :attr:`harvested` (J), at once (a host that
-        reads them all at every step reads them here)."""
-        kinetic, potential_K, potential_Keq, dissipated_C, dissipated_Ceq, plastic, work_base, initial, \
-            _, harvested_left, harvested_right, _, electrical_work = self
-        dissipated = dissipated_C + dissipated_Ceq + plastic
-        balance_error = kinetic + potential_K + potential_Keq - (initial + work_base - dissipated - electrical_work)
-        return dissipated, balance_error, harvested_left + harvested_right
+        """:attr:`dissipated`, :attr:`balance_error` and :attr:`harvested` (J), at once."""
+        return ledger_totals(*self)
+
+
+def ledger_totals(kinetic, potential_K, potential_Keq, dissipated_C, dissipated_Ceq, plastic, work_base, initial,
+                  electrical, harvested_left, harvested_right, converted, electrical_work) -> tuple[float, float, float]:
+    """``dissipated``, ``balance_error`` and ``harvested`` (J) of the fields of an
+    :class:`EnergyLedger` (given as a plain tuple by a host that reads them at every step)."""
+    dissipated = dissipated_C + dissipated_Ceq + plastic
+    balance_error = kinetic + potential_K + potential_Keq - (initial + work_base - dissipated - electrical_work)
+    return dissipated, balance_error, harvested_left + harvested_right
 
 
 def ledger_integrals(rates: np.ndarray, powers: np.ndarray) -> np.ndarray:

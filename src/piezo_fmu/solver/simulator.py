@@ -11,7 +11,7 @@ from ..model.dynamics import FREE, LEFT, RIGHT
 from ..model.parameters import Parameters
 from ..model.voltage import quasi_static
 from .integrator import Integrator
-from .ledger import EnergyLedger
+from .ledger import EnergyLedger, ledger_totals
 from .metrics import Metrics
 from .records import Impact, State
 from .snapshot import restore_into, snapshot_of
@@ -101,7 +101,7 @@ class Simulator(Integrator):
         side = self._side
         deflection = self.deflection(side) if side else 0.0
         left, right = (deflection, 0.0) if side == LEFT else (0.0, deflection)
-        metrics, energy = self.metrics, self.energy
+        metrics, energy = self.metrics, self._energy_values()
         if self._circuit is None:
             # The quasi-static voltage of the barrier in contact; the other one's is 0.
             v = quasi_static(self.barrier.k_V, deflection)
@@ -111,11 +111,10 @@ class Simulator(Integrator):
             v_left, v_right = self._circuit_now(LEFT)[0], self._circuit_now(RIGHT)[0]
             R = self.params.R_load
             power_left, power_right = v_left * v_left / R, v_right * v_right / R
-        dissipated, balance_error, harvested = energy.totals()
+        dissipated, balance_error, harvested = ledger_totals(*energy)
         return (self._p, self._dp, self._q, self._dq, left, right, v_left, v_right, self.base_force,
                 metrics.impact_count, metrics.last_impact_voltage, metrics.V_rms, metrics.P_ave, metrics.DI,
-                dissipated, balance_error, harvested, power_left, power_right,
-                energy.harvested_left, energy.harvested_right, metrics.DI_ls)
+                dissipated, balance_error, harvested, power_left, power_right, energy[9], energy[10], metrics.DI_ls)
 
     @property
     def impacts(self) -> list[Impact]:
@@ -136,21 +135,25 @@ class Simulator(Integrator):
 
     @property
     def energy(self) -> EnergyLedger:
+        return EnergyLedger(*self._energy_values())
+
+    def _energy_values(self) -> tuple:
+        """The fields of :attr:`energy`, in its order (a plain tuple: a host reads them every step)."""
         kinetic, potential_K, potential_Keq = self.damper.mechanical_energy(self._side, self._p, self._dp, self._q,
                                                                             self._dq, self._y)
         br = self._bracket
-        flows = self._ledger.flows(br)
+        dissipated_C, dissipated_Ceq, plastic, work_base = self._ledger.flows(br)
         initial = self._ledger.initial
         circuit = self._circuit
         if circuit is None:
-            return EnergyLedger(kinetic, potential_K, potential_Keq, *flows, initial)
+            return (kinetic, potential_K, potential_Keq, dissipated_C, dissipated_Ceq, plastic, work_base, initial,
+                    0.0, 0.0, 0.0, 0.0, 0.0)
         v_left, harvested_left = self._circuit_now(LEFT)
         v_right, harvested_right = self._circuit_now(RIGHT)
         converted = circuit.converted_now(br.s, br.powers) if br else circuit.converted
-        return EnergyLedger(kinetic, potential_K, potential_Keq, *flows, initial,
-                            electrical=0.5 * self.barrier.C_p * (v_left * v_left + v_right * v_right),
-                            harvested_left=harvested_left, harvested_right=harvested_right,
-                            converted=converted, electrical_work=converted if self.damper.coupled else 0.0)
+        return (kinetic, potential_K, potential_Keq, dissipated_C, dissipated_Ceq, plastic, work_base, initial,
+                0.5 * self.barrier.C_p * (v_left * v_left + v_right * v_right), harvested_left, harvested_right,
+                converted, converted if self.damper.coupled else 0.0)
 
     @property
     def contact_frequency(self) -> float:
