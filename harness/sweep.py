@@ -22,8 +22,8 @@ from typing import Optional
 
 from . import analysis, figures
 from .fmu import FmuModel
-from .spec import SweepSpec, UsageError, prepare_output_dir
-from .store import SPEC_FILE, PointStore
+from .spec import SweepSpec, UsageError
+from .store import SPEC_FILE, PointStore, open_folder
 
 
 @dataclass
@@ -60,35 +60,10 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     Without ``resume`` a folder that already holds finished points is refused unless ``force``
     (which starts over); with ``resume`` it must hold this same sweep of this same FMU.
     """
-    folder = prepare_output_dir(folder, option)
-    spec_path = folder / SPEC_FILE
-    store = PointStore(folder)
     header = {**spec.to_dict(), "fmu": str(model.path), "fmu_guid": model.guid}
-    done: dict = {}
-    start_over = force
-    if spec_path.is_file():
-        try:
-            old = json.loads(spec_path.read_text())
-        except (OSError, ValueError):
-            old = None
-        if resume:
-            if old is None:
-                raise UsageError(f"--resume: {spec_path} cannot be read; use --force to start over")
-            same = (json.dumps({k: old.get(k) for k in ("axes", "fixed", "stop_time", "step")}, sort_keys=True)
-                    == spec.fingerprint())
-            if not same:
-                raise UsageError(f"--resume: {folder} holds a different sweep (its {SPEC_FILE} has other axes, "
-                                 "fixed values, duration or step); use the same arguments, or --force to start over")
-            if old.get("fmu_guid") != model.guid:
-                raise UsageError(f"--resume: {folder} was run with another FMU (GUID {old.get('fmu_guid')}, "
-                                 f"now {model.guid}); use --force to start over")
-            done = store.load()
-        elif not force and store.path.is_file() and store.path.stat().st_size > 0:
-            count = len(store.load())
-            raise UsageError(f"{option} {folder} already holds a sweep ({count} of its points finished); "
-                             "pass --resume to finish it, --force to start over, or choose another folder")
-    else:
-        start_over = True  # points without a sweep.json belong to no known sweep
+    folder, done, start_over = open_folder(folder, SPEC_FILE, header, ("axes", "fixed", "stop_time", "step"),
+                                           resume, force, option, "sweep")
+    store = PointStore(folder)
     expected = dict(spec.points())
     for index, record in done.items():
         point = expected.get(index)
