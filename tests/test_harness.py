@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
+from fmu_host import assert_refused, run_cli
 
 from harness import cli
 from harness.analysis import PAPER_ZONES, open_dataset, perfectibility
@@ -38,10 +39,6 @@ def fmu(tmp_path_factory) -> Path:
     dest = tmp_path_factory.mktemp("fmu") / "PiezoImpactDamper.fmu"
     subprocess.run([sys.executable, "-m", "piezo_fmu.fmu_build", "--dest", str(dest)], check=True, cwd=ROOT)
     return dest
-
-
-def run_cli(*argv) -> int:
-    return cli.main([str(a) for a in argv])
 
 
 def direct_fmpy(fmu: Path, stop_time: float, step: float, **values) -> dict:
@@ -222,11 +219,7 @@ def test_two_designs_table_puts_the_papers_numbers_beside_ours(fmu, tmp_path):
 ])
 def test_bad_sweep_input_is_refused_with_exit_status_2(fmu, tmp_path, capsys, argv, words):
     out = tmp_path / "out"
-    assert run_cli("sweep", *argv, "--out", out, "--fmu", fmu, "--no-progress") == 2
-    message = capsys.readouterr().err
-    assert message.startswith("piezo-fmu sweep: error:")
-    for word in words:
-        assert word in message, (word, message)
+    assert_refused(capsys, "sweep", argv, words, "--out", out, "--fmu", fmu, "--no-progress")
     assert not (out / "points.jsonl").exists()
 
 
