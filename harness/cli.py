@@ -8,6 +8,10 @@
     piezo-fmu load-sweep [--r-min OHM] [--r-max OHM] [--count N] [--models 1,2] [--set NAME=VALUE ...]
                          [--stop-time S] [--step S] [--impact-step S] [--out DIR] [--jobs N]
     piezo-fmu impact-voltage [--load OHM ...] [--models 0,1,2] [--step S] [--set NAME=VALUE ...] [--out DIR]
+    piezo-fmu frequency-response [--amplitude M | --acceleration M/S2] [--ratio-min R] [--ratio-max R] [--count N]
+                                 [--load OHM] [--voltage-model N] [--set NAME=VALUE ...] [--samples N]
+                                 [--tolerance TOL] [--max-cycles N] [--newton-iterations N] [--out DIR]
+                                 [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
     piezo-fmu presets
 
 Values are SI (m, kg, s, V). Bad input (an unknown parameter, an empty or reversed range, a
@@ -20,11 +24,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import signal
 import sys
 from pathlib import Path
 from typing import Optional
+
+import numpy as np
 
 from . import presets
 from .spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP, UsageError
@@ -51,15 +58,18 @@ def _parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    def model_options(sub) -> None:
+        sub.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                         help="set an FMU parameter (SI), repeatable")
+        sub.add_argument("--fmu", type=Path, default=None,
+                         help="the FMU (default $PIEZO_FMU or fmus/PiezoImpactDamper.fmu)")
+
     def common(sub, step_default: float, step_help: str) -> None:
         sub.add_argument("--stop-time", type=float, default=None, metavar="S",
                          help=f"duration simulated, s (default {DEFAULT_STOP_TIME:g})")
         sub.add_argument("--step", type=float, default=None, metavar="S",
                          help=f"communication step, s (default {step_default:g}; {step_help})")
-        sub.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                         help="set an FMU parameter (SI), repeatable")
-        sub.add_argument("--fmu", type=Path, default=None,
-                         help="the FMU (default $PIEZO_FMU or fmus/PiezoImpactDamper.fmu)")
+        model_options(sub)
 
     def results_folder(sub, name: str) -> None:
         sub.add_argument("--out", type=Path, default=Path("results") / name, metavar="DIR",
@@ -67,6 +77,18 @@ def _parser() -> argparse.ArgumentParser:
 
     def jobs(sub) -> None:
         sub.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+
+    def engine(sub) -> None:
+        """Where the points run, and what to do with a folder that holds some already."""
+        jobs(sub)
+        where = sub.add_mutually_exclusive_group()
+        where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
+        where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
+        again = sub.add_mutually_exclusive_group()
+        again.add_argument("--resume", action="store_true",
+                           help="finish the run in --out: run only the points not yet recorded")
+        again.add_argument("--force", action="store_true", help="start over, discarding the points in --out")
+        sub.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series, summary, figures")
     common(nominal, 1e-4, "the time series' sampling")
@@ -86,17 +108,9 @@ def _parser() -> argparse.ArgumentParser:
                        help="grids and values from a TOML file ([grid], [set], stop_time, step, out)")
     sweep.add_argument("--out", type=Path, default=None, metavar="DIR",
                        help="results folder (default results/PRESET for a preset)")
-    jobs(sweep)
-    where = sweep.add_mutually_exclusive_group()
-    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
-    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
-    again = sweep.add_mutually_exclusive_group()
-    again.add_argument("--resume", action="store_true",
-                       help="finish the sweep in --out: run only the points not yet recorded")
-    again.add_argument("--force", action="store_true", help="start over, discarding the points in --out")
+    engine(sweep)
     sweep.add_argument("--zone-quantile", type=float, default=None, metavar="Q",
                        help="our zones are the points at or above this quantile of each metric (default 0.9)")
-    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
     common(two, 1e-4, "the time series' sampling")
@@ -132,6 +146,35 @@ def _parser() -> argparse.ArgumentParser:
                              "(default 0,1,2)")
     results_folder(impact, "impact-voltage")
 
+    frequency = commands.add_parser(
+        "frequency-response", help="steady-state response to harmonic base motion, swept up and down in frequency",
+        description="Shake the damper's base as y = Y sin(w t) at --count frequencies from --ratio-min to "
+                    "--ratio-max times sqrt(K/M); at each, find the periodic steady state (shooting, verified by "
+                    "simulation) starting from the previous frequency's state, sweeping up and down, with and "
+                    "without the damper. Writes frequency_response.nc/.csv, summary.json and amplitude.png, "
+                    "power.png, impacts.png.")
+    amplitude = frequency.add_mutually_exclusive_group()
+    amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
+                           help="base displacement amplitude Y, m (default 1e-3)")
+    amplitude.add_argument("--acceleration", type=float, default=None, metavar="M/S2",
+                           help="base acceleration amplitude A, m/s^2 (then Y = A / w^2 at each frequency)")
+    for option, kind, metavar, text in (
+            ("--ratio-min", float, "R", "lowest frequency, as w / sqrt(K/M) (default 0.5)"),
+            ("--ratio-max", float, "R", "highest frequency, as w / sqrt(K/M) (default 2)"),
+            ("--count", int, "N", "frequencies, evenly spaced (default 61: sqrt(K/M) is one)"),
+            ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p), near the optimum)"),
+            ("--voltage-model", int, "N", "0 quasi-static (nothing harvested), 1 circuit one-way, 2 circuit "
+                                          "coupled (default 1)"),
+            ("--samples", int, "N", "communication steps per forcing period (default 64)"),
+            ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
+            ("--max-cycles", int, "N", "cap on the forcing cycles simulated per frequency (default 400)"),
+            ("--newton-iterations", int, "N", "Newton iterations per shooting attempt; 0 marches in time only "
+                                              "(default 12)")):
+        frequency.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    model_options(frequency)
+    results_folder(frequency, "frequency-response")
+    engine(frequency)
+
     commands.add_parser("presets", help="list the built-in sweeps")
     return parser
 
@@ -148,7 +191,7 @@ def main(argv: Optional[list[str]] = None) -> int:
             print(presets.describe())
             return 0
         return {"nominal": _nominal, "sweep": _sweep, "two-designs": _two_designs, "load-sweep": _load_sweep,
-                "impact-voltage": _impact_voltage}[args.command](args)
+                "impact-voltage": _impact_voltage, "frequency-response": _frequency_response}[args.command](args)
     except UsageError as error:
         print(f"{PROG} {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -297,7 +340,6 @@ def _circuit_overrides(model, args) -> dict:
 
 def _load_sweep(args) -> int:
     from . import load
-    from .engine import default_jobs
     from .fmu import FmuRunError
     from .spec import check_times, prepare_output_dir
 
@@ -315,9 +357,7 @@ def _load_sweep(args) -> int:
     stop_time, step = _times(args, DEFAULT_SWEEP_STEP)
     impact_step = load.IMPACT_STEP if args.impact_step is None else args.impact_step
     check_times(stop_time, impact_step)
-    jobs = args.jobs if args.jobs is not None else default_jobs()
-    if jobs < 1:
-        raise UsageError(f"--jobs {jobs}: need at least 1 worker")
+    jobs = _jobs(args)
     out = prepare_output_dir(args.out)
     extremes = [{**overrides, "voltage_model": m, "R_load": r} for m in models for r in (r_min, r_max)]
     unzipdir, instance = _preflight(model, extremes, "load sweep")
@@ -371,6 +411,126 @@ def _impact_voltage(args) -> int:
     return 0
 
 
+# -- frequency response ----------------------------------------------------------------------------
+
+def _positive(value: float, option: str, what: str, unit: str) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{option} {value:g}: {what} must be a finite number > 0; allowed range (0, inf) {unit}")
+    return value
+
+
+def _whole(value: int, option: str, lowest: int, what: str) -> int:
+    if value < lowest:
+        raise UsageError(f"{option} {value}: {what}; allowed range [{lowest}, inf)")
+    return value
+
+
+def _frequency_spec(args, model, instance):
+    """The study the options ask for, checked (values, ranges, and the FMU's own checks)."""
+    from . import frequency_response as fr
+    from .load import circuit_constants
+    from .spec import check_with_fmu
+    from .steady_state import STATE_PARAMETERS, Settings
+
+    overrides = _assignments(model, args.set)
+    for name in overrides:
+        if name in STATE_PARAMETERS:
+            raise UsageError(f"--set {name}: the initial state is what the shooting sets at each frequency; "
+                             f"it cannot be set (the settable parameters exclude {', '.join(STATE_PARAMETERS)})")
+        if name in ("R_load", "voltage_model"):
+            raise UsageError(f"--set {name}: give the load and the voltage model with --load and --voltage-model")
+    if args.acceleration is not None:
+        amplitude, acceleration = None, _positive(args.acceleration, "--acceleration", "the base acceleration "
+                                                  "amplitude A", "m/s^2")
+    else:
+        amplitude = _positive(fr.DEFAULT_AMPLITUDE if args.amplitude is None else args.amplitude, "--amplitude",
+                              "the base displacement amplitude Y", "m")
+        acceleration = None
+    lo = _positive(fr.DEFAULT_RATIOS[0] if args.ratio_min is None else args.ratio_min, "--ratio-min",
+                   "the lowest frequency ratio w / sqrt(K/M)", "")
+    hi = _positive(fr.DEFAULT_RATIOS[1] if args.ratio_max is None else args.ratio_max, "--ratio-max",
+                   "the highest frequency ratio w / sqrt(K/M)", "")
+    if not lo < hi:
+        raise UsageError(f"--ratio-min {lo:g} is not below --ratio-max {hi:g}: "
+                         f"{'reversed' if lo > hi else 'empty'} range of frequencies (give RATIO_MIN < RATIO_MAX)")
+    count = _whole(fr.DEFAULT_COUNT if args.count is None else args.count, "--count", 2,
+                   "need at least 2 frequencies")
+    defaults = Settings()
+    samples = _whole(defaults.samples if args.samples is None else args.samples, "--samples", 16,
+                     "need at least 16 communication steps per forcing period")
+    tolerance = defaults.tolerance if args.tolerance is None else args.tolerance
+    if not (math.isfinite(tolerance) and 0 < tolerance <= 1e-2):
+        raise UsageError(f"--tolerance {tolerance:g}: the steady-state tolerance (relative to Y) must lie in "
+                         "(0, 0.01]")
+    cycles = _whole(defaults.max_cycles if args.max_cycles is None else args.max_cycles, "--max-cycles", 10,
+                    "the cap on forcing cycles per frequency must be at least 10")
+    newton = _whole(defaults.newton_iterations if args.newton_iterations is None else args.newton_iterations,
+                    "--newton-iterations", 0, "the Newton iterations cannot be negative")
+    parameter = model.parameters["voltage_model"]
+    try:
+        voltage_model = parameter.coerce(fr.DEFAULT_VOLTAGE_MODEL if args.voltage_model is None else args.voltage_model)
+    except ValueError as error:
+        raise UsageError(f"--voltage-model {args.voltage_model}: {error}") from None
+    values = {**overrides, "voltage_model": voltage_model}
+    if args.load is not None:
+        values["R_load"] = _load_value(model, args.load, "--load")
+    else:
+        check_with_fmu(model, instance, [values], "--set")
+        values["R_load"] = float(f"{circuit_constants(instance, values)['R_opt_estimate_ohm']:.6g}")
+    parameters = {**model.defaults(), **values}
+    natural = math.sqrt(parameters["K"] / parameters["M"])
+    ratios = tuple(float(f"{r:.12g}") for r in np.linspace(lo, hi, count))
+    peak_y = amplitude if amplitude is not None else acceleration / (lo * natural) ** 2
+    peak = float(np.max(fr.linear_transmissibility(np.linspace(lo, hi, 4001) * natural, parameters["M"],
+                                                   parameters["K"], parameters["C"])))
+    spec = fr.FrequencySpec(ratios=ratios, natural=natural, amplitude=amplitude, acceleration=acceleration,
+                            values=values, wide_gap=fr.wide_gap(peak_y, peak),
+                            settings=Settings(samples=samples, tolerance=tolerance, max_cycles=cycles,
+                                              newton_iterations=newton))
+    check_with_fmu(model, instance, [spec.chain_values(damper) for damper in fr.DAMPER_CASES], "frequency response")
+    return spec
+
+
+def _frequency_response(args) -> int:
+    from . import frequency_response as fr
+    from .engine import InProcess
+
+    model = _model(args)
+    missing = [name for name in ("harvested_energy", "base_displacement") if name not in {**model.outputs, **model.inputs}]
+    if missing:
+        raise UsageError(f"--fmu {model.path}: the FMU lacks {', '.join(missing)}; rebuild it")
+    jobs = _jobs(args)
+    unzipdir, instance = _preflight(model, [{}], "--fmu")
+    try:
+        spec = _frequency_spec(args, model, instance)
+        run = fr.open_frequency_run(model, spec, args.out, args.resume, args.force)
+        remaining = run.total - len(run.done)
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+        try:
+            run.begin()
+            if remaining:
+                backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
+                           else _backend(args, model, unzipdir, min(jobs, len(fr.CHAINS))))
+                print(f"{PROG} frequency-response: {remaining} of {run.total} points to run on {backend.description}",
+                      file=sys.stderr)
+                try:
+                    fr.execute(run, backend, progress=False if args.no_progress else None)
+                except KeyboardInterrupt:
+                    print(f"\n{PROG} frequency-response: interrupted; {len(run.done)} of {run.total} points are saved "
+                          f"in {run.folder / 'points.jsonl'}; run the same command with --resume to finish",
+                          file=sys.stderr)
+                    return 130
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    finally:
+        instance.free()
+        shutil.rmtree(unzipdir, ignore_errors=True)
+    result = fr.finish(model, run)
+    print("\n".join(fr.summary_lines(result["summary"])))
+    print(f"  results in {run.folder}")
+    return 0
+
+
 # -- sweep -----------------------------------------------------------------------------------------
 
 def _sweep_specs(args, model) -> tuple[list[tuple[str, object, Path]], Optional[dict], Path]:
@@ -418,16 +578,34 @@ def _sweep_specs(args, model) -> tuple[list[tuple[str, object, Path]], Optional[
     return sweeps, panels, Path(out)
 
 
+def _jobs(args) -> int:
+    from .engine import default_jobs
+
+    jobs = args.jobs if args.jobs is not None else default_jobs()
+    if jobs < 1:
+        raise UsageError(f"--jobs {jobs}: need at least 1 worker")
+    return jobs
+
+
+def _backend(args, model, unzipdir: str, jobs: int):
+    """The engine's backend the options ask for: a Dask cluster, or a pool of ``jobs`` processes."""
+    from .engine import DaskCluster, ProcessPool
+
+    if args.scheduler or args.dask_local:
+        try:
+            return DaskCluster(model, args.scheduler, jobs)
+        except (OSError, TimeoutError) as error:
+            raise UsageError(f"--scheduler {args.scheduler}: cannot reach the Dask scheduler ({error})") from None
+    return ProcessPool(model, unzipdir, jobs)
+
+
 def _sweep(args) -> int:
     from . import analysis
-    from .engine import DaskCluster, ProcessPool, default_jobs
     from .sweep import display, execute, finish, open_sweep
 
     model = _model(args)
     sweeps, panels, out = _sweep_specs(args, model)
-    jobs = args.jobs if args.jobs is not None else default_jobs()
-    if jobs < 1:
-        raise UsageError(f"--jobs {jobs}: need at least 1 worker")
+    jobs = _jobs(args)
     quantile = analysis.DEFAULT_ZONE_QUANTILE if args.zone_quantile is None else args.zone_quantile
     if not 0.0 < quantile < 1.0:
         raise UsageError(f"--zone-quantile {quantile:g}: must lie between 0 and 1")
@@ -441,13 +619,7 @@ def _sweep(args) -> int:
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         if remaining:
-            if args.scheduler or args.dask_local:
-                try:
-                    backend = DaskCluster(model, args.scheduler, jobs)
-                except (OSError, TimeoutError) as error:
-                    raise UsageError(f"--scheduler {args.scheduler}: cannot reach the Dask scheduler ({error})") from None
-            else:
-                backend = ProcessPool(model, unzipdir, min(jobs, remaining))
+            backend = _backend(args, model, unzipdir, min(jobs, remaining))
         for run in runs:
             run.begin()
         if remaining:

@@ -298,3 +298,59 @@ def impact_figure(series: dict, side: str, load: float, label: str, path: Path) 
     axes[-1, 0].set_xlabel("time (ms)")
     fig.suptitle(f"First impact: voltage under the voltage models, $R$ = {ohms(load)}", fontsize=10)
     return _save(fig, Path(path))
+
+
+#: Line styles of the frequency-response figures, by (damper, direction).
+FREQUENCY_STYLES = {
+    ("with", "up"): dict(color="C0", marker="^", ls="-", label="with damper, sweep up"),
+    ("with", "down"): dict(color="C3", marker="v", ls="--", label="with damper, sweep down"),
+    ("without", "up"): dict(color="0.45", marker="", ls="-", label="without damper, sweep up"),
+    ("without", "down"): dict(color="0.45", marker="o", ls="none", label="without damper, sweep down"),
+}
+
+
+def frequency_figures(ds, folder: Path) -> list[Path]:
+    """``amplitude.png`` (with and without the damper, up and down, the closed form without it),
+    ``power.png`` (harvested power) and ``impacts.png`` (impacts per forcing cycle), against the
+    frequency ratio; bands where the two directions differ are shaded, points that did not settle
+    are drawn hollow."""
+    from .frequency_response import bands
+
+    plt = _plt()
+    ratio = ds["ratio"].values
+    half_step = 0.5 * (ratio[-1] - ratio[0]) / max(1, len(ratio) - 1)
+    panels = (
+        ("amplitude.png", "amplitude", 1e3, "main mass amplitude (mm), half peak-to-peak", ("with", "without"), True),
+        ("power.png", "harvested_power", 1e3, "harvested power, both loads (mW)", ("with",), False),
+        ("impacts.png", "impacts_per_cycle", 1.0, "impacts per forcing cycle", ("with",), False),
+    )
+    written = []
+    for name, key, factor, label, cases, log in panels:
+        fig, ax = plt.subplots(figsize=(7.5, 4.6))
+        for lo, hi in bands(ratio, ds["directions_differ"].sel(damper="with").values == 1):
+            ax.axvspan(lo - half_step, hi + half_step, color="C1", alpha=0.15, lw=0)
+        for damper in cases:
+            for direction in ("up", "down"):
+                style = FREQUENCY_STYLES[damper, direction]
+                y = ds[key].sel(damper=damper, direction=direction).values * factor
+                settled = ds["settled"].sel(damper=damper, direction=direction).values == 1
+                ax.plot(ratio, np.where(settled, y, np.nan), ls=style["ls"], color=style["color"], lw=1.2,
+                        marker=style["marker"], ms=4, label=style["label"])
+                if (~settled).any():
+                    ax.plot(ratio[~settled], y[~settled], ls="none", marker=style["marker"] or "o", ms=6,
+                            mfc="none", color=style["color"])
+        if key == "amplitude":
+            linear = ds["transmissibility_linear"].values * ds["base_amplitude"].values * factor
+            ax.plot(ratio, linear, color="k", ls=":", lw=1.0, label="without damper, closed form")
+            ax.set_yscale("log" if log else "linear")
+        if ds["directions_differ"].sel(damper="with").values.any():
+            ax.axvspan(np.nan, np.nan, color="C1", alpha=0.15, label="up and down differ (with damper)")
+        ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="not settled (hollow)")
+        ax.set_xlabel(r"frequency ratio $\omega / \sqrt{K/M}$")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        ax.set_title(f"Frequency response: {ds.attrs['excitation']}", fontsize=9)
+        written.append(_save(fig, Path(folder) / name))
+    return written
+
