@@ -23,7 +23,6 @@ keeps every finished point; run the same command with ``--resume`` to finish it.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import shutil
 import signal
@@ -111,6 +110,9 @@ def _parser() -> argparse.ArgumentParser:
     engine(sweep)
     sweep.add_argument("--zone-quantile", type=float, default=None, metavar="Q",
                        help="our zones are the points at or above this quantile of each metric (default 0.9)")
+    sweep.add_argument("--damping", choices=("eq29", "ls"), default="eq29",
+                       help="the damping measure that ranks the vibratory-based and design zones: eq29, the "
+                            "paper's DI (default), or ls, DI_ls, the least-squares decay slope of the maxima")
 
     two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
     common(two, 1e-4, "the time series' sampling")
@@ -525,7 +527,7 @@ def _frequency_response(args) -> int:
     finally:
         instance.free()
         shutil.rmtree(unzipdir, ignore_errors=True)
-    result = fr.finish(model, run)
+    result = fr.finish(model, run, jobs)
     print("\n".join(fr.summary_lines(result["summary"])))
     print(f"  results in {run.folder}")
     return 0
@@ -601,7 +603,7 @@ def _backend(args, model, unzipdir: str, jobs: int):
 
 def _sweep(args) -> int:
     from . import analysis
-    from .sweep import display, execute, finish, open_sweep
+    from .sweep import display, execute, open_sweep, write_results
 
     model = _model(args)
     sweeps, panels, out = _sweep_specs(args, model)
@@ -609,6 +611,9 @@ def _sweep(args) -> int:
     quantile = analysis.DEFAULT_ZONE_QUANTILE if args.zone_quantile is None else args.zone_quantile
     if not 0.0 < quantile < 1.0:
         raise UsageError(f"--zone-quantile {quantile:g}: must lie between 0 and 1")
+    if args.damping == "ls" and "damping_inclination_ls" not in model.outputs:
+        raise UsageError(f"--damping ls: the FMU {model.path} lacks the output damping_inclination_ls (an FMU "
+                         "built before it); rebuild it, or rank by eq. 29 (--damping eq29)")
 
     runs = [open_sweep(model, spec, folder, args.resume, args.force) for _, spec, folder in sweeps]
     corners = [spec.values_at(c) for _, spec, _ in sweeps for c in _corners(spec)]
@@ -639,21 +644,15 @@ def _sweep(args) -> int:
         signal.signal(signal.SIGTERM, previous)
         shutil.rmtree(unzipdir, ignore_errors=True)
 
-    results = {}
-    for (name, _, _), run in zip(sweeps, runs):
-        results[name] = finish(model, run, quantile)
+    names = [name for name, _, _ in sweeps]
+    results = write_results(model, runs, names, panels, out, quantile, args.damping, jobs)
+    for name, run in zip(names, runs):
         print("\n".join(analysis.zone_summary_lines(results[name]["zones"], display(results[name]["dataset"]))))
         failed = int((results[name]["dataset"]["status"] == "error").sum())
         if failed:
             print(f"  {failed} points were rejected by the FMU (status 'error' in {run.folder / 'sweep.csv'})")
         print(f"  results in {run.folder}")
     if panels:
-        from . import figures
-
-        figures.paper_figures({letter: (results[name]["dataset"], results[name]["masks"], results[name]["paper_zone"])
-                               for letter, name in panels.items()}, out)
-        combined = {name: results[name]["zones"] for name in panels.values()}
-        (out / "zones.json").write_text(json.dumps(combined, indent=2) + "\n")
         print(f"Figs. 4-9 in {out}")
     return 0
 

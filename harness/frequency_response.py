@@ -230,7 +230,10 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None
     """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives."""
     from tqdm import tqdm
 
+    from .analysis import preload
+
     tasks = run.first_tasks()
+    loading = preload()
     bar = tqdm(total=run.total, initial=len(run.done), unit="pt", desc="frequency response", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True
@@ -244,6 +247,7 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None
         finally:
             bar.close()
             backend.close(cancel=interrupted)
+            loading.join()
 
 
 # -- results ---------------------------------------------------------------------------------------
@@ -419,19 +423,20 @@ def tidy_frame(ds):
     return frame
 
 
-def finish(model: FmuModel, run: FrequencyRun) -> dict:
-    """Write the Dataset, the CSV, the summary and the figures; return ``{"dataset", "summary", "files"}``."""
+def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
+    """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes);
+    return ``{"dataset", "summary", "files"}``."""
     from . import figures
     from .analysis import save_dataset
 
     ds = build_dataset(run.spec, run.done, model)
     report = summarize(ds)
+    rendering = figures.Rendering(figures.frequency_figure_calls(ds, run.folder), jobs)
     files = [run.folder / "frequency_response.nc", run.folder / "frequency_response.csv", run.folder / "summary.json"]
     save_dataset(ds, files[0])
     tidy_frame(ds).to_csv(files[1], index=False)
     files[2].write_text(json.dumps(report, indent=2) + "\n")
-    files += figures.frequency_figures(ds, run.folder)
-    return {"dataset": ds, "summary": report, "files": files}
+    return {"dataset": ds, "summary": report, "files": files + rendering.wait()}
 
 
 def rest_state() -> list[float]:

@@ -47,10 +47,10 @@ def run_cli(*argv) -> int:
 
 
 def assert_refused(capsys, command: str, argv, words, *more) -> None:
-    """``piezo-fmu COMMAND ARGV MORE`` exits with status 2 and a message headed by the command
-    that names every one of ``words``."""
+    """``piezo-fmu COMMAND ARGV MORE`` exits with status 2 and an error headed by the command
+    (after the usage, for an option argparse itself refuses) that names every one of ``words``."""
     assert run_cli(command, *argv, *more) == 2
     message = capsys.readouterr().err
-    assert message.startswith(f"piezo-fmu {command}: error:"), message
+    assert f"piezo-fmu {command}: error:" in message.splitlines()[-1], message
     for word in words:
         assert word in message, (word, message)
