@@ -53,6 +53,8 @@ A --config file (SI units; the command line's --grid, --set, --stop-time and --s
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import frequency_response as fr
+
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -69,6 +71,28 @@ def _parser() -> argparse.ArgumentParser:
         sub.add_argument("--step", type=float, default=None, metavar="S",
                          help=f"communication step, s (default {step_default:g}; {step_help})")
         model_options(sub)
+
+    def band_options(sub, defaults: dict) -> None:
+        """The harmonic base motion, the band of frequencies and the steady-state settings."""
+        amplitude = sub.add_mutually_exclusive_group()
+        amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
+                               help="base displacement amplitude Y, m (default 1e-3)")
+        amplitude.add_argument("--acceleration", type=float, default=None, metavar="M/S2",
+                               help="base acceleration amplitude A, m/s^2 (then Y = A / w^2 at each frequency)")
+        for option, kind, metavar, text in (
+                ("--ratio-min", float, "R", f"lowest frequency, as w / sqrt(K/M) (default {defaults['ratios'][0]:g})"),
+                ("--ratio-max", float, "R", f"highest frequency, as w / sqrt(K/M) (default {defaults['ratios'][1]:g})"),
+                ("--count", int, "N", f"frequencies, evenly spaced (default {defaults['count']})"),
+                ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p), near the optimum)"),
+                ("--voltage-model", int, "N", "0 quasi-static (nothing harvested), 1 circuit one-way, 2 circuit "
+                                              "coupled (default 1)"),
+                ("--samples", int, "N", "communication steps per forcing period (default 64)"),
+                ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
+                ("--max-cycles", int, "N", f"cap on the forcing cycles simulated per frequency (default "
+                                           f"{defaults['max_cycles']})"),
+                ("--newton-iterations", int, "N", "Newton iterations per shooting attempt; 0 marches in time only "
+                                                  "(default 12)")):
+            sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
 
     def results_folder(sub, name: str) -> None:
         sub.add_argument("--out", type=Path, default=Path("results") / name, metavar="DIR",
@@ -155,27 +179,49 @@ def _parser() -> argparse.ArgumentParser:
                     "simulation) starting from the previous frequency's state, sweeping up and down, with and "
                     "without the damper. Writes frequency_response.nc/.csv, summary.json and amplitude.png, "
                     "power.png, impacts.png.")
-    amplitude = frequency.add_mutually_exclusive_group()
-    amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
-                           help="base displacement amplitude Y, m (default 1e-3)")
-    amplitude.add_argument("--acceleration", type=float, default=None, metavar="M/S2",
-                           help="base acceleration amplitude A, m/s^2 (then Y = A / w^2 at each frequency)")
-    for option, kind, metavar, text in (
-            ("--ratio-min", float, "R", "lowest frequency, as w / sqrt(K/M) (default 0.5)"),
-            ("--ratio-max", float, "R", "highest frequency, as w / sqrt(K/M) (default 2)"),
-            ("--count", int, "N", "frequencies, evenly spaced (default 61: sqrt(K/M) is one)"),
-            ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p), near the optimum)"),
-            ("--voltage-model", int, "N", "0 quasi-static (nothing harvested), 1 circuit one-way, 2 circuit "
-                                          "coupled (default 1)"),
-            ("--samples", int, "N", "communication steps per forcing period (default 64)"),
-            ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
-            ("--max-cycles", int, "N", "cap on the forcing cycles simulated per frequency (default 400)"),
-            ("--newton-iterations", int, "N", "Newton iterations per shooting attempt; 0 marches in time only "
-                                              "(default 12)")):
-        frequency.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    band_options(frequency, fr.BAND_DEFAULTS)
     model_options(frequency)
     results_folder(frequency, "frequency-response")
     engine(frequency)
+
+    from . import optimize as opt
+
+    optimizer = commands.add_parser(
+        "optimize", help="a design optimiser (differential evolution) over FMU parameters",
+        description="Search --param parameters within bounds with scipy's differential_evolution, its evaluations "
+                    "run in parallel on the sweep engine, to minimise J: under --objective perfectibility "
+                    "-100 (w_DI DI/DI_ref + w_V V_rms/V_ref) over a free decay (eq. 31 with reference values); under "
+                    "--objective forced w_amplitude peak_with/peak_without + w_transmissibility peak/Y - w_power "
+                    "P/P_ref over a band of harmonic base motion. References are the reference design's (the FMU's "
+                    "start values and --set) unless given. Reports the optimum, its sensitivity and the best point "
+                    "of a grid of the same budget; every evaluation is appended to evaluations.jsonl (--resume).")
+    optimizer.add_argument("--param", action="append", default=[], metavar="NAME=LO:HI",
+                           help="a parameter to search and its bounds (SI), repeatable")
+    optimizer.add_argument("--objective", choices=tuple(opt.TERMS), default="perfectibility",
+                           help="perfectibility (free decay, default) or forced (harmonic base motion over a band)")
+    optimizer.add_argument("--weight", action="append", default=[], metavar="TERM=W",
+                           help="weight of a term: DI, V_rms (perfectibility; default 0.5 each) or amplitude, "
+                                "transmissibility, power (forced; default 1, 0, 0.5)")
+    optimizer.add_argument("--reference", action="append", default=[], metavar="TERM=VALUE",
+                           help="reference value of a term, SI: DI (m/s), V_rms (V); power (W), amplitude_without (m) "
+                                "(default: the reference design's)")
+    optimizer.add_argument("--damping", choices=("eq29", "ls"), default="eq29",
+                           help="the damping term of perfectibility: eq29 (default) or ls (DI_ls)")
+    for option, kind, metavar, text in (
+            ("--maxiter", int, "N", "generations of differential evolution at most (default 30; forced 8)"),
+            ("--popsize", int, "N", "population per searched parameter (default 15; forced 6)"),
+            ("--tol", float, "TOL", "differential evolution's relative tolerance (default 0.01)"),
+            ("--seed", int, "N", "seed of the search (default 1): the same seed proposes the same designs"),
+            ("--sensitivity-step", float, "F", "step of the sensitivity, a fraction of each range (default 0.02)")):
+        optimizer.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    optimizer.add_argument("--polish", action="store_true",
+                           help="polish the best design with L-BFGS-B (finite differences): for smooth objectives; "
+                                "impacts make them piecewise, where it spends evaluations for nothing")
+    optimizer.add_argument("--no-grid", action="store_true", help="no grid of the same budget to compare with")
+    common(optimizer, DEFAULT_SWEEP_STEP, "free-decay runs of the perfectibility objective")
+    band_options(optimizer, opt.BAND_DEFAULTS)
+    results_folder(optimizer, "optimize")
+    engine(optimizer)
 
     commands.add_parser("presets", help="list the built-in sweeps")
     return parser
@@ -193,7 +239,8 @@ def main(argv: Optional[list[str]] = None) -> int:
             print(presets.describe())
             return 0
         return {"nominal": _nominal, "sweep": _sweep, "two-designs": _two_designs, "load-sweep": _load_sweep,
-                "impact-voltage": _impact_voltage, "frequency-response": _frequency_response}[args.command](args)
+                "impact-voltage": _impact_voltage, "frequency-response": _frequency_response,
+                "optimize": _optimize}[args.command](args)
     except UsageError as error:
         print(f"{PROG} {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -427,13 +474,16 @@ def _whole(value: int, option: str, lowest: int, what: str) -> int:
     return value
 
 
-def _frequency_spec(args, model, instance):
-    """The study the options ask for, checked (values, ranges, and the FMU's own checks)."""
+def _frequency_spec(args, model, instance, defaults: Optional[dict] = None, searched: tuple = ()):
+    """The study the options ask for, checked (values, ranges, and the FMU's own checks);
+    ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the
+    band's (:data:`harness.frequency_response.BAND_DEFAULTS` unless given)."""
     from . import frequency_response as fr
     from .load import circuit_constants
     from .spec import check_with_fmu
     from .steady_state import STATE_PARAMETERS, Settings
 
+    defaults = defaults or fr.BAND_DEFAULTS
     overrides = _assignments(model, args.set)
     for name in overrides:
         if name in STATE_PARAMETERS:
@@ -448,15 +498,18 @@ def _frequency_spec(args, model, instance):
         amplitude = _positive(fr.DEFAULT_AMPLITUDE if args.amplitude is None else args.amplitude, "--amplitude",
                               "the base displacement amplitude Y", "m")
         acceleration = None
-    lo = _positive(fr.DEFAULT_RATIOS[0] if args.ratio_min is None else args.ratio_min, "--ratio-min",
+    lo = _positive(defaults["ratios"][0] if args.ratio_min is None else args.ratio_min, "--ratio-min",
                    "the lowest frequency ratio w / sqrt(K/M)", "")
-    hi = _positive(fr.DEFAULT_RATIOS[1] if args.ratio_max is None else args.ratio_max, "--ratio-max",
+    hi = _positive(defaults["ratios"][1] if args.ratio_max is None else args.ratio_max, "--ratio-max",
                    "the highest frequency ratio w / sqrt(K/M)", "")
-    if not lo < hi:
+    count = _whole(defaults["count"] if args.count is None else args.count, "--count", defaults["fewest"],
+                   f"need at least {defaults['fewest']} frequenc{'y' if defaults['fewest'] == 1 else 'ies'}")
+    if count == 1 and lo != hi:
+        raise UsageError(f"--count 1 needs --ratio-min = --ratio-max (one frequency); got {lo:g} and {hi:g}")
+    if count > 1 and not lo < hi:
         raise UsageError(f"--ratio-min {lo:g} is not below --ratio-max {hi:g}: "
                          f"{'reversed' if lo > hi else 'empty'} range of frequencies (give RATIO_MIN < RATIO_MAX)")
-    count = _whole(fr.DEFAULT_COUNT if args.count is None else args.count, "--count", 2,
-                   "need at least 2 frequencies")
+    cap = defaults["max_cycles"]
     defaults = Settings()
     samples = _whole(defaults.samples if args.samples is None else args.samples, "--samples", 16,
                      "need at least 16 communication steps per forcing period")
@@ -464,7 +517,7 @@ def _frequency_spec(args, model, instance):
     if not (math.isfinite(tolerance) and 0 < tolerance <= 1e-2):
         raise UsageError(f"--tolerance {tolerance:g}: the steady-state tolerance (relative to Y) must lie in "
                          "(0, 0.01]")
-    cycles = _whole(defaults.max_cycles if args.max_cycles is None else args.max_cycles, "--max-cycles", 10,
+    cycles = _whole(cap if args.max_cycles is None else args.max_cycles, "--max-cycles", 10,
                     "the cap on forcing cycles per frequency must be at least 10")
     newton = _whole(defaults.newton_iterations if args.newton_iterations is None else args.newton_iterations,
                     "--newton-iterations", 0, "the Newton iterations cannot be negative")
@@ -479,9 +532,10 @@ def _frequency_spec(args, model, instance):
     else:
         check_with_fmu(model, instance, [values], "--set")
         values["R_load"] = float(f"{circuit_constants(instance, values)['R_opt_estimate_ohm']:.6g}")
+    checked = {name: value for name, value in values.items() if name not in searched}
     parameters = {**model.defaults(), **values}
     natural = math.sqrt(parameters["K"] / parameters["M"])
-    ratios = tuple(float(f"{r:.12g}") for r in np.linspace(lo, hi, count))
+    ratios = tuple(float(f"{r:.12g}") for r in (np.linspace(lo, hi, count) if count > 1 else [lo]))
     peak_y = amplitude if amplitude is not None else acceleration / (lo * natural) ** 2
     peak = float(np.max(fr.linear_transmissibility(np.linspace(lo, hi, 4001) * natural, parameters["M"],
                                                    parameters["K"], parameters["C"])))
@@ -489,7 +543,8 @@ def _frequency_spec(args, model, instance):
                             values=values, wide_gap=fr.wide_gap(peak_y, peak),
                             settings=Settings(samples=samples, tolerance=tolerance, max_cycles=cycles,
                                               newton_iterations=newton))
-    check_with_fmu(model, instance, [spec.chain_values(damper) for damper in fr.DAMPER_CASES], "frequency response")
+    check_with_fmu(model, instance, [{**checked, "d": spec.wide_gap} if damper == "without" else checked
+                                     for damper in fr.DAMPER_CASES], "frequency response")
     return spec
 
 
@@ -531,6 +586,142 @@ def _frequency_response(args) -> int:
     print("\n".join(fr.summary_lines(result["summary"])))
     print(f"  results in {run.folder}")
     return 0
+
+
+# -- optimize --------------------------------------------------------------------------------------
+
+def _search_bounds(model, texts: list[str], fixed: dict, forced: bool) -> tuple[tuple, tuple, tuple]:
+    """``--param NAME=LO:HI`` as checked ``(names, lower, upper)``."""
+    from .optimize import STATE
+    from .spec import _checked, _lookup, _number, _split
+
+    names, lower, upper = [], [], []
+    for text in texts:
+        name, rest = _split(text, "--param", "NAME=LO:HI")
+        where = f"--param {text}"
+        parameter = _lookup(model, name, where)
+        if parameter.type != "Real":
+            raise UsageError(f"{where}: {name} is an Integer parameter; the search is over Real parameters only "
+                             "(fix it with --set)")
+        if forced and name in STATE:
+            raise UsageError(f"{where}: the initial state is what the shooting sets under the forced objective")
+        if name in fixed:
+            raise UsageError(f"{where}: {name} is both searched (--param) and fixed (--set); give one")
+        if name in names:
+            raise UsageError(f"{where}: {name} is given more than one --param")
+        parts = rest.split(":")
+        if len(parts) != 2:
+            raise UsageError(f"{where}: expected NAME=LO:HI, e.g. m=0.02:0.2")
+        lo, hi = (_checked(parameter, _number(part, where), where) for part in parts)
+        if not lo < hi:
+            raise UsageError(f"{where}: {'reversed' if lo > hi else 'empty'} range for {name}: LO = {lo:g} must be "
+                             f"below HI = {hi:g}")
+        names.append(name)
+        lower.append(float(lo))
+        upper.append(float(hi))
+    if not names:
+        raise UsageError("--param NAME=LO:HI is required: the parameters to search and their bounds")
+    return tuple(names), tuple(lower), tuple(upper)
+
+
+def _terms_option(texts: list[str], option: str, allowed: tuple, positive: bool) -> dict:
+    """``TERM=VALUE`` pairs of ``--weight`` or ``--reference``, checked."""
+    from .spec import _number, _split
+
+    values = {}
+    for text in texts:
+        name, rest = _split(text, option, "TERM=VALUE")
+        if name not in allowed:
+            raise UsageError(f"{option} {text}: unknown term {name!r}; allowed: {', '.join(allowed)}")
+        value = _number(rest, f"{option} {text}")
+        if positive and not value > 0:
+            raise UsageError(f"{option} {text}: a reference value must be > 0; allowed range (0, inf)")
+        values[name] = value
+    return values
+
+
+def _optimize(args) -> int:
+    from . import optimize as opt
+    from .engine import InProcess
+    from .spec import check_with_fmu, check_times
+
+    model = _model(args)
+    forced = args.objective == "forced"
+    jobs = _jobs(args)
+    fixed = _assignments(model, args.set)
+    names, lower, upper = _search_bounds(model, args.param, fixed, forced)
+    weights = {**opt.DEFAULT_WEIGHTS[args.objective],
+               **_terms_option(args.weight, "--weight", tuple(opt.TERMS[args.objective]), positive=False)}
+    if not any(weights.values()):
+        raise UsageError(f"--weight: every weight is 0 ({', '.join(f'{k}={v:g}' for k, v in weights.items())}); "
+                         "nothing to optimise")
+    references = _terms_option(args.reference, "--reference", opt.REFERENCES[args.objective], positive=True)
+    search = opt.SEARCH_DEFAULTS[args.objective]
+    settings = {key: getattr(args, key) if getattr(args, key) is not None else default
+                for key, default in search.items()}
+    for key, lowest in (("maxiter", 1), ("popsize", 1)):
+        _whole(settings[key], f"--{key}", lowest, f"need at least {lowest}")
+    if not (math.isfinite(settings["tol"]) and settings["tol"] > 0):
+        raise UsageError(f"--tol {settings['tol']:g}: the tolerance must be a finite number > 0; allowed range (0, inf)")
+    if not 0 < settings["sensitivity_step"] <= 0.5:
+        raise UsageError(f"--sensitivity-step {settings['sensitivity_step']:g}: a fraction of each range; allowed "
+                         "range (0, 0.5]")
+    settings.update(polish=args.polish, grid=not args.no_grid)
+    if args.damping == "ls" and "damping_inclination_ls" not in model.outputs:
+        raise UsageError(f"--damping ls: the FMU {model.path} lacks the output damping_inclination_ls; rebuild it")
+    stop_time, step = _times(args, DEFAULT_SWEEP_STEP)
+    check_times(stop_time, step)
+    unzipdir, instance = _preflight(model, [fixed], "--set")
+    backend = None
+    try:
+        band, values = None, fixed
+        if forced:
+            band = _frequency_spec(args, model, instance, opt.BAND_DEFAULTS, names)
+            values = band.values
+        parameters = {**model.defaults(), **values}
+        problem = opt.Problem(names=names, lower=lower, upper=upper, objective=args.objective, weights=weights,
+                              fixed=dict(values), stop_time=stop_time, step=step,
+                              damping="DI_ls" if args.damping == "ls" else "DI", band=band,
+                              without_each_time=forced and bool(set(names) & {"M", "K", "C"}))
+        corners = [problem.values(corner) for corner in _box_corners(lower, upper)]
+        check_with_fmu(model, instance, corners, "the bounds of --param")
+        folder, cache = opt.open_optimization(model, problem, references, args.out, args.resume, args.force, settings)
+        backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
+                   else _backend(args, model, unzipdir, jobs))
+        print(f"{PROG} optimize: {args.objective} objective over {', '.join(names)} on {backend.description}"
+              + (f" ({len(cache)} evaluations already recorded)" if cache else ""), file=sys.stderr)
+        optimizer = opt.Optimizer(problem, backend, folder, references=dict(references), cache=cache)
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+        try:
+            report = opt.run(optimizer, [parameters[name] for name in names], settings["maxiter"],
+                             settings["popsize"], settings["seed"], settings["polish"], settings["tol"],
+                             settings["grid"], settings["sensitivity_step"])
+        except KeyboardInterrupt:
+            print(f"\n{PROG} optimize: interrupted; every evaluation so far is in {folder / opt.EVALUATIONS_FILE}; "
+                  "run the same command with --resume to go on", file=sys.stderr)
+            return 130
+        except ValueError as error:
+            raise UsageError(str(error)) from None
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    finally:
+        if backend is not None and not isinstance(backend, InProcess):
+            backend.close()
+        instance.free()
+        shutil.rmtree(unzipdir, ignore_errors=True)
+    opt.write_report(report, problem, folder, model)
+    print("\n".join(opt.report_lines(report, problem, model)))
+    print(f"  results in {folder}")
+    return 0
+
+
+def _box_corners(lower: tuple, upper: tuple) -> list[tuple]:
+    """The corners of the search box (all of them up to 6 parameters, else the two extremes)."""
+    import itertools
+
+    if len(lower) <= 6:
+        return list(itertools.product(*zip(lower, upper)))
+    return [tuple(lower), tuple(upper)]
 
 
 # -- sweep -----------------------------------------------------------------------------------------

@@ -467,3 +467,26 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
     ax.legend(fontsize=7)
     ax.set_title(f"Frequency response: {ds.attrs['excitation']}", fontsize=9)
     return _save(fig, path)
+
+
+def convergence_figure(records: list[dict], report: dict, path: Path) -> Path:
+    """``convergence.png``: the objective of every evaluation of the search in order, the best so
+    far, and the best point of the grid of the same budget."""
+    search = sorted((r for r in records if r.get("phase") == "search"), key=lambda r: r["index"])
+    values = np.array([r["objective"] if r["objective"] is not None else np.nan for r in search], float)
+    values[~np.isfinite(values)] = np.nan
+    fig, ax = _figure((7.5, 4.2))
+    ax.plot(np.arange(1, len(values) + 1), values, ".", ms=4, color="C0", alpha=0.6, label="evaluations")
+    ax.plot(np.arange(1, len(values) + 1), np.fmin.accumulate(np.where(np.isnan(values), np.inf, values)),
+            color="C3", lw=1.5, label="best so far")
+    grid = report.get("grid")
+    if grid and grid.get("best"):
+        ax.axhline(grid["best"]["objective"], color="k", ls="--", lw=1.0,
+                   label=f"best of the grid of the same budget ({grid['evaluations']} points)")
+    ax.set_xlabel("evaluation (differential evolution, then its polish)")
+    ax.set_ylabel("objective J (minimised)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(f"Optimisation, {report['objective']} objective: {report['search']['evaluations']} evaluations, "
+                 f"{report['search']['wall_s']:.1f} s", fontsize=9)
+    return _save(fig, path)

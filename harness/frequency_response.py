@@ -41,9 +41,9 @@ HEADER_FILE = "frequency_response.json"
 #: The four chains, in the order their first points are submitted (the costly ones first).
 CHAINS = (("with", "up"), ("with", "down"), ("without", "up"), ("without", "down"))
 DAMPER_CASES, DIRECTIONS = ("with", "without"), ("up", "down")
-DEFAULT_RATIOS = (0.5, 2.0)
-#: 61 frequencies: at least 60, and sqrt(K/M) itself is one of them (a step of 0.025).
-DEFAULT_COUNT = 61
+#: The band's defaults: w / sqrt(K/M) from 0.5 to 2 at 61 frequencies (at least 60, and sqrt(K/M)
+#: itself one of them, a step of 0.025), at most 400 cycles each, at least 2 frequencies.
+BAND_DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 400, "fewest": 2}
 #: Base displacement amplitude (m): the no-damper response at sqrt(K/M) would be 1/(2 zeta) = 316
 #: times it, so 1 mm makes the nominal damper impact over a band around resonance.
 DEFAULT_AMPLITUDE = 1e-3

@@ -19,10 +19,10 @@ POINTS_FILE = "points.jsonl"
 
 
 class PointStore:
-    """The ``points.jsonl`` of one sweep folder."""
+    """The ``points.jsonl`` (or another ``name``) of one results folder."""
 
-    def __init__(self, folder: Path):
-        self.path = Path(folder) / POINTS_FILE
+    def __init__(self, folder: Path, name: str = POINTS_FILE):
+        self.path = Path(folder) / name
         self._handle = None
 
     def load(self) -> dict[int, dict]:
@@ -70,7 +70,8 @@ class PointStore:
 
 
 def open_folder(folder: Path, header_file: str, header: dict, same: tuple, resume: bool, force: bool,
-                option: str = "--out", what: str = "run") -> tuple[Path, dict[int, dict], bool]:
+                option: str = "--out", what: str = "run", points_file: str = POINTS_FILE
+                ) -> tuple[Path, dict[int, dict], bool]:
     """Check a results folder for the run ``header`` describes and read what it holds; change
     nothing. Returns ``(folder, finished records by index, start_over)``.
 
@@ -81,7 +82,7 @@ def open_folder(folder: Path, header_file: str, header: dict, same: tuple, resum
     """
     folder = prepare_output_dir(folder, option)
     path = folder / header_file
-    store = PointStore(folder)
+    store = PointStore(folder, points_file)
     done: dict = {}
     start_over = force
     if path.is_file():
