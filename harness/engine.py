@@ -16,8 +16,8 @@ Besides sweep points, every backend runs *tasks* (:meth:`ProcessPool.run_tasks`)
 ``function`` is a module-level function (it travels by name) returning a JSON-safe result. A
 task's result may call for more tasks (``follow``), submitted before the result is handed on, so
 that dependent work, such as the next frequency of a frequency sweep, keeps the workers busy.
-:func:`map_tasks` runs one function over many items and returns the results in order (the
-``workers`` map of ``scipy.optimize.differential_evolution``).
+The optimiser's evaluations are tasks too (the ``workers`` map of
+``scipy.optimize.differential_evolution``).
 """
 
 from __future__ import annotations
@@ -80,15 +80,6 @@ def _run_task_in_worker(function: Callable, args: tuple):
 Task = tuple
 #: What follows a finished task: ``follow(tag, result)`` returns the tasks it calls for.
 Follow = Optional[Callable[[object, object], Iterable[Task]]]
-
-
-def map_tasks(backend, function: Callable, items: Iterable) -> list:
-    """``[function(instance, item) for item in items]`` on ``backend``'s workers, in order."""
-    items = list(items)
-    results: list = [None] * len(items)
-    for index, result in backend.run_tasks([(index, function, (item,)) for index, item in enumerate(items)]):
-        results[index] = result
-    return results
 
 
 def _chunks(items: list, jobs: int) -> list[list]:

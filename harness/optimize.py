@@ -42,7 +42,6 @@ from typing import Optional
 
 import numpy as np
 
-from .engine import map_tasks
 from .fmu import FmuRunError, Instance
 from .frequency_response import FrequencySpec, rest_state, solve_point
 from .store import PointStore, open_folder
@@ -211,8 +210,9 @@ class Optimizer:
         # Each design once: a population may hold the same design twice.
         missing = list({self._key(x): x for x in xs if self._key(x) not in self.cache}.values())
         if missing:
+            tasks = [(k, _evaluate_task, ((self.problem, x, without),)) for k, x in enumerate(missing)]
             with PointStore(self.folder, EVALUATIONS_FILE) as store:
-                for record in map_tasks(self.backend, _evaluate_task, [(self.problem, x, without) for x in missing]):
+                for _, record in self.backend.run_tasks(tasks):
                     record["phase"] = self.phase
                     record["index"] = len(self.cache)
                     self._score(record)
