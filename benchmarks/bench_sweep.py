@@ -102,15 +102,18 @@ def main() -> None:
 
         # 1. the engine, worker start-up included
         unzipdir = model.extract()
-        begin = time.perf_counter()
+        begin, begin_cpu = time.perf_counter(), time.process_time()
         execute(runs, ProcessPool(model, unzipdir, args.jobs), progress=False)
-        engine_s = time.perf_counter() - begin
+        engine_s, main_cpu_s = time.perf_counter() - begin, time.process_time() - begin_cpu
         shutil.rmtree(unzipdir, ignore_errors=True)
-        begin = time.perf_counter()
+        begin, before = time.perf_counter(), os.times()
         output_parts: dict = {}
         results = write_results(model, runs, [name for name, _, _ in sweeps], panels, out, jobs=args.jobs,
                                 timings=output_parts)
-        outputs_s = time.perf_counter() - begin
+        outputs_s, after = time.perf_counter() - begin, os.times()
+        # CPU of this process and of the forked figure processes (reaped, so counted in os.times).
+        outputs_cpu_s = sum(getattr(after, f) - getattr(before, f)
+                            for f in ("user", "system", "children_user", "children_system"))
         records = [r for run in runs for r in run.done.values()]
         worker = {"wall_s": statistics.mean(r["seconds"] for r in records),
                   "cpu_s": statistics.mean(r["cpu_seconds"] for r in records)}
@@ -162,7 +165,9 @@ def main() -> None:
                  f"{args.step:g} s; engine = process pool of {args.jobs} workers; {os.cpu_count()} cores"),
         "load_average_before": [round(x, 2) for x in load_before],
         "engine": {"wall_s": engine_s, "points_per_s": engine_pps, "point_in_worker": worker,
-                   "outputs_s": outputs_s, "outputs_share_of_simulation": outputs_s / engine_s,
+                   "main_process_cpu_s": main_cpu_s, "workers_cpu_s": sum(r["cpu_seconds"] for r in records),
+                   "outputs_s": outputs_s, "outputs_cpu_s": outputs_cpu_s,
+                   "outputs_share_of_simulation": outputs_s / engine_s,
                    "outputs_parts": output_parts, "rejected_points": sum(r["status"] != "ok" for r in records)},
         "naive_fmpy_loop": {**naive, "points_per_s": 1 / naive["wall_s"], "extrapolated_set_s": total * naive["wall_s"]},
         "core_in_process": {**core, "points_per_s": 1 / core["wall_s"], "extrapolated_set_one_core_s": total * core["wall_s"]},
@@ -189,7 +194,9 @@ def main() -> None:
     print(f"outputs     {outputs_s:6.2f} s wall = {100 * outputs_s / engine_s:.0f}% of the simulation (target <= "
           f"{100 * TARGET_OUTPUTS:g}%): datasets {output_parts['datasets_s']:.2f} s, then {output_parts['figures']} "
           f"figures in {args.jobs} processes {output_parts['figures_s']:.2f} s, NetCDF, CSV and zones written "
-          f"meanwhile in {output_parts['files_s']:.2f} s")
+          f"meanwhile in {output_parts['files_s']:.2f} s; {outputs_cpu_s:.2f} s CPU in all. During the simulation the "
+          f"workers spent {report['engine']['workers_cpu_s']:.1f} s CPU, this process {main_cpu_s:.2f} s (importing "
+          "and warming up the writers while it waits)")
     print(f"naive loop  {ms(naive['wall_s'])} wall, {ms(naive['cpu_s'])} CPU per point = {1 / naive['wall_s']:6.1f} "
           f"points/s ({naive['points_timed']} points timed; the set would take {total * naive['wall_s']:.0f} s)")
     print(f"core        {ms(core['wall_s'])} wall, {ms(core['cpu_s'])} CPU per point = {1 / core['wall_s']:6.1f} "

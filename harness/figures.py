@@ -200,9 +200,8 @@ def damping_measures_figure(ds, quantile: float, path: Path) -> Path:
 
     paper_zone = {name: PAPER_ZONES[name] for name in ds["DI"].dims if name in PAPER_ZONES} or None
     fig, axes = _figure((12.4, 4.8), 1, 2)
-    for ax, metric, name in zip(axes, ("DI", "DI_ls"), ("eq. 29", "least-squares slope of the maxima")):
-        draw_panel(ax, ds, metric, top_zone(ds, metric, quantile)[0], paper_zone,
-                   f"{METRIC_DISPLAY[metric][2]} ({name}), {_subtitle(ds)}")
+    for ax, metric, name in zip(axes, ("DI", "DI_ls"), ("(a) DI, eq. 29", "(b) DI_ls, least-squares decay slope")):
+        draw_panel(ax, ds, metric, top_zone(ds, metric, quantile)[0], paper_zone, f"{name}: {_subtitle(ds)}")
     fig.suptitle(f"Damping measures over sweep {ds.attrs.get('sweep')}: vibratory-based zones "
                  f"(top {100 * (1 - quantile):.0f}%)", fontsize=11)
     fig.subplots_adjust(**TWO_PANELS)
@@ -458,6 +457,8 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
         linear = ds["transmissibility_linear"].values * ds["base_amplitude"].values * factor
         ax.plot(ratio, linear, color="k", ls=":", lw=1.0, label="without damper, closed form")
         ax.set_yscale("log")
+    elif key == "harvested_power":
+        ax.set_yscale("symlog", linthresh=1e-2)  # zero where nothing impacts, decades where it does
     if differ.any():
         ax.axvspan(np.nan, np.nan, color="C1", alpha=0.15, label="up and down differ (with damper)")
     ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="not settled (hollow)")
