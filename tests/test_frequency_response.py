@@ -165,7 +165,19 @@ def test_up_and_down_sweeps_agree_away_from_jump_bands(impact_study):
                   <= tolerance)
 
 
-# -- resume ----------------------------------------------------------------------------------------
+# -- backends and resume ---------------------------------------------------------------------------
+
+def test_dask_and_one_process_give_the_same_bits(tmp_path):
+    pytest.importorskip("distributed")
+    study = ("frequency-response", "--set", "d=1", "--ratio-min", 0.9, "--ratio-max", 1.0, "--count", 2,
+             "--fmu", FMU, "--no-progress")
+    assert run_cli(*study, "--dask-local", "--jobs", 2, "--out", tmp_path / "dask") == 0
+    assert run_cli(*study, "--jobs", 1, "--out", tmp_path / "one") == 0
+    dask, one = (open_dataset(tmp_path / name / "frequency_response.nc") for name in ("dask", "one"))
+    assert (dask["settled"] == 1).all()
+    for key in ("amplitude", "rms", "V_rms", "harvested_power", "impacts_per_cycle", "cycles", "settled"):
+        assert np.array_equal(dask[key].values, one[key].values), key
+
 
 def test_resume_continues_each_chain_from_its_last_finished_point(impact_study, tmp_path):
     shutil.copy(impact_study / "frequency_response.json", tmp_path)
