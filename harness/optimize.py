@@ -55,7 +55,9 @@ TERMS = {
 }
 DEFAULT_WEIGHTS = {
     "perfectibility": {"DI": 0.5, "V_rms": 0.5},
-    "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.5},
+    # Lightly on power: the regimes that harvest most chatter with large amplitude (with 0.5, the
+    # optimum of (m, d) was such a regime, its peak 119 mm against 16 mm for the best amplitude).
+    "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.1},
 }
 #: The perfectibility's terms are in % (eq. 31).
 SCALE = {"perfectibility": 100.0, "forced": 1.0}
