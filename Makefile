@@ -41,7 +41,7 @@ test: system-deps $(STAMP)
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
 # The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
 fmu: $(STAMP)
-	$(BIN)/python -m piezo_fmu.fmu_build
+	$(BIN)/python -m piezo_fmu.fmi.build
 	$(BIN)/python crosscheck/run_crosscheck.py --write
 
 crosscheck: system-deps $(STAMP)
@@ -51,7 +51,7 @@ hosts: system-deps $(STAMP)
 	$(BIN)/python hosts/coupled.py
 
 fmu-check: $(STAMP)
-	$(BIN)/python -m piezo_fmu.fmu_build --check
+	$(BIN)/python -m piezo_fmu.fmi.build --check
 
 bench: bench-core bench-fmu bench-sweep
 

@@ -1,12 +1,20 @@
 """Wall time and accuracy of the core against the solve_ivp/DOP853 reference (nominal case, 2 s).
 
 Run: ``.venv/bin/python benchmarks/bench_core.py``. See ``benchmarks/README.md``.
+
+``--baseline SRC`` also times the core of another source tree (the ``src`` folder of a checkout of
+another commit, e.g. ``git worktree add /tmp/before <commit>``, then ``--baseline /tmp/before/src``)
+beside this tree's, both in child processes, interleaved, best of ``CORE_REPEATS`` each: how a
+change of the core's code moved its speed, measured side by side in one run.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import os
+import subprocess
 import sys
 import time
 import warnings
@@ -68,7 +76,42 @@ def errors(candidate, truth):
     return dt, dv, dp, abs(cdi / tdi - 1)
 
 
+#: A child process's timing of the core of the source tree on its sys.path: best wall and CPU time (s).
+_CHILD = """
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+from piezo_fmu import Parameters, Simulator
+best = [float("inf"), float("inf")]
+for _ in range(int(sys.argv[2])):
+    w, c = time.perf_counter(), time.process_time()
+    Simulator(Parameters()).advance(2.0, 0.0, 0.0)
+    best = [min(best[0], time.perf_counter() - w), min(best[1], time.process_time() - c)]
+print(json.dumps(best))
+"""
+
+
+def compare_trees(baseline: str, rounds: int = 3) -> None:
+    """This tree's core beside the one in ``baseline`` (a ``src`` folder), in child processes."""
+    trees = {"this tree": os.path.join(HERE, "..", "src"), "baseline": baseline}
+    best = {name: [math.inf, math.inf] for name in trees}
+    for _ in range(rounds):
+        for name, src in trees.items():
+            out = subprocess.run([sys.executable, "-c", _CHILD, src, str(CORE_REPEATS)], check=True,
+                                 capture_output=True, text=True).stdout
+            best[name] = [min(a, b) for a, b in zip(best[name], json.loads(out))]
+    print(f"core, nominal {T_END:g} s, best of {rounds} x {CORE_REPEATS} runs per tree (wall / CPU time):")
+    for name, (wall, cpu) in best.items():
+        print(f"  {name:10s} {wall * 1e3:6.2f} / {cpu * 1e3:6.2f} ms")
+    print(f"  this tree / baseline: {best['this tree'][0] / best['baseline'][0]:.3f} (wall), "
+          f"{best['this tree'][1] / best['baseline'][1]:.3f} (CPU)")
+
+
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--baseline", help="the src folder of another checkout, to time its core beside this one's")
+    args = parser.parse_args()
+    if args.baseline:
+        compare_trees(args.baseline)
     warnings.simplefilter("ignore")  # scipy's note that rtol is near its floor
     nominal = Parameters()
     designed = Parameters(x1=10e-3, m=0.2, d=10e-3)

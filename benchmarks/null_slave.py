@@ -1,32 +1,19 @@
-"""The benchmark's floor: a pythonfmu slave with the piezo FMU's variables that does no work.
+"""The benchmark's floor: the piezo FMU's own FMI 2.0 slave with the core taken out.
 
-It registers the same table (names, types, causalities, start values) as
-``piezo_fmu.fmu_slave`` and reads and writes plain values; ``do_step`` returns at once. Timing
-the piezo FMU against it through fmpy isolates what the core costs on top of FMI, pythonfmu and
-fmpy. Inside its FMU it imports the table from the bundled ``piezo_fmu_slave`` module.
+It is :class:`piezo_fmu.fmi.fmi2.PiezoImpactDamper` (the same variables, type checks and
+value-reference tables), reading and writing its values exactly as the piezo FMU does, but
+``do_step`` does no work and the outputs are never updated from a core (``no_core.py``). Timing
+the piezo FMU against it through fmpy isolates what the core and its readings cost on top of FMI,
+pythonfmu and fmpy. Inside its FMU it imports the piezo slave (``piezo_fmu_slave``).
 """
 
-from pythonfmu import DefaultExperiment, Fmi2Slave
+from no_core import NoCore
+from piezo_fmu_slave import PiezoImpactDamper
 
-from piezo_fmu_slave import VARIABLES, scalar_variable
 
-
-class PiezoImpactDamperFloor(Fmi2Slave):
+class PiezoImpactDamperFloor(PiezoImpactDamper):
     """Same variables as PiezoImpactDamper; no physics, no work."""
-
-    default_experiment = DefaultExperiment(start_time=0.0, stop_time=2.0, step_size=1e-4)
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._values = {spec.name: spec.start if spec.start is not None else 0 for spec in VARIABLES}
-        for spec in VARIABLES:
-            self.register_variable(self._variable(spec.name, spec), nested=False)
-
-    def _variable(self, name, spec):
-        def setter(value):
-            self._values[name] = value
-        return scalar_variable(spec, lambda: self._values[name],
-                               None if spec.causality == "output" else setter)
-
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        return True
+        self._cosim = NoCore(self._cosim._log_error)

@@ -16,7 +16,11 @@ communication points:
 - ``ecos``: ecos through ``ecospy``; it adds the step to its time at every step
   (``t_{k+1} = t_k + 0.001`` in floating point) and passes ``(t_k, 0.001)`` to ``fmi2DoStep``.
   The inputs are set through ``set_real`` before each step;
-- ``native``: the project's C host (``hosts/native_host.c``) under its launcher.
+- ``native``: the project's C host (``hosts/native_host.c``) in a bare environment (its PATH
+  holding this Python; the FMU's loader finds it);
+- ``fmpy-fmi3``, ``ecos-fmi3`` and ``native-fmi3``: the same masters as ``fmpy``, ``ecos`` and
+  ``native`` on the FMI 3.0 FMU (``fmus/PiezoImpactDamper3.fmu``, co-simulation; fmpy's
+  ``FMU3Slave``).
 
 Each returns a :class:`Result` with the output time series and, where the driver knows them,
 the ``(t_k, h_k)`` it passed to ``fmi2DoStep``.
@@ -34,7 +38,9 @@ import numpy as np
 
 from crosscheck import scenario
 
-IMPORTERS = ("fmpy", "libcosim", "ecos", "native", "fmpy-simulate")
+IMPORTERS = ("fmpy", "libcosim", "ecos", "native", "fmpy-simulate", "fmpy-fmi3", "ecos-fmi3", "native-fmi3")
+#: FMI 3.0 type names as the FMI 2.0 ones the results use.
+_FMI2_TYPE = {"Float64": "Real", "Int32": "Integer"}
 
 
 @dataclass
@@ -51,14 +57,15 @@ def output_variables(fmu: Path) -> list[tuple[str, int, str]]:
     from fmpy import read_model_description
 
     md = read_model_description(str(fmu))
-    return [(v.name, v.valueReference, v.type) for v in md.modelVariables if v.causality == "output"]
+    return [(v.name, v.valueReference, _FMI2_TYPE.get(v.type, v.type)) for v in md.modelVariables
+            if v.causality == "output"]
 
 
 def _value_references(fmu: Path) -> dict[str, tuple[int, str]]:
     from fmpy import read_model_description
 
     md = read_model_description(str(fmu))
-    return {v.name: (v.valueReference, v.type) for v in md.modelVariables}
+    return {v.name: (v.valueReference, _FMI2_TYPE.get(v.type, v.type)) for v in md.modelVariables}
 
 
 def _check_input_grid(in_time: np.ndarray, times: np.ndarray) -> None:
@@ -92,6 +99,7 @@ def run_fmpy(fmu: Path = scenario.FMU_PATH, times: Optional[np.ndarray] = None,
     """
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave
 
     if steps is not None:
         steps = [(float(t), float(h)) for t, h in steps]
@@ -104,7 +112,8 @@ def run_fmpy(fmu: Path = scenario.FMU_PATH, times: Optional[np.ndarray] = None,
         _check_input_grid(in_time, scenario.grid())
     start_values = dict(scenario.START_VALUES if start_values is None else start_values)
     md = read_model_description(str(fmu))
-    refs = {v.name: (v.valueReference, v.type) for v in md.modelVariables}
+    refs = _value_references(fmu)
+    fmi3 = md.fmiVersion.startswith("3")
     outs = output_variables(fmu)
     real_outs = [vr for _, vr, kind in outs if kind == "Real"]
     int_outs = [vr for _, vr, kind in outs if kind == "Integer"]
@@ -113,35 +122,42 @@ def run_fmpy(fmu: Path = scenario.FMU_PATH, times: Optional[np.ndarray] = None,
     input_vrs = [refs[name][0] for name in input_names]
 
     unzipdir = extract(str(fmu))
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="damper")
+    slave = (FMU3Slave if fmi3 else FMU2Slave)(guid=md.guid, unzipDirectory=unzipdir,
+                                               modelIdentifier=md.coSimulation.modelIdentifier, instanceName="damper")
+    get_real, get_integer, set_real, set_integer = (
+        (slave.getFloat64, slave.getInt32, slave.setFloat64, slave.setInt32) if fmi3
+        else (slave.getReal, slave.getInteger, slave.setReal, slave.setInteger))
     rows = []
     try:
         slave.instantiate()
-        slave.setupExperiment(startTime=float(times[0]), stopTime=float(times[-1]))
+        if not fmi3:
+            slave.setupExperiment(startTime=float(times[0]), stopTime=float(times[-1]))
         for name, value in start_values.items():
             vr, kind = refs[name]
             if kind == "Integer":
-                slave.setInteger([vr], [int(value)])
+                set_integer([vr], [int(value)])
             else:
-                slave.setReal([vr], [float(value)])
+                set_real([vr], [float(value)])
 
         def set_inputs(k: int) -> None:
             if input_vrs:
-                slave.setReal(input_vrs, [float(inputs[name][k]) for name in input_names])
+                set_real(input_vrs, [float(inputs[name][k]) for name in input_names])
 
         def read() -> list:
-            reals = slave.getReal(real_outs)
-            ints = slave.getInteger(int_outs) if int_outs else []
+            reals = get_real(real_outs)
+            ints = get_integer(int_outs) if int_outs else []
             return [reals[i] if kind == "Real" else ints[i] for kind, i in order]
 
         set_inputs(0)
-        slave.enterInitializationMode()
+        if fmi3:
+            slave.enterInitializationMode(startTime=float(times[0]), stopTime=float(times[-1]))
+        else:
+            slave.enterInitializationMode()
         slave.exitInitializationMode()
         rows.append(read())
         for k, (t, h) in enumerate(steps):
             set_inputs(k)
-            slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            slave.doStep(t, h)
             rows.append(read())
         slave.terminate()
     finally:
@@ -272,7 +288,7 @@ class TimeSeries:
 
 # -- ecos -----------------------------------------------------------------------------------------
 
-def run_ecos(fmu: Path = scenario.FMU_PATH) -> Result:
+def run_ecos(fmu: Path = scenario.FMU_PATH, importer: str = "ecos") -> Result:
     """ecos (``ecospy``): fixed-step simulation at the scenario's step."""
     from ecospy import EcosLib, EcosSimulation, EcosSimulationStructure
 
@@ -309,13 +325,13 @@ def run_ecos(fmu: Path = scenario.FMU_PATH) -> Result:
     finally:
         simulation.free()
         structure.free()
-    return _finish("ecos", times, rows, outs, steps)
+    return _finish(importer, times, rows, outs, steps)
 
 
 # -- the C host -----------------------------------------------------------------------------------
 
-def run_native(fmu: Path = scenario.FMU_PATH) -> Result:
-    """The project's C host, under ``hosts/run_native_host.sh``, on the cross-check input."""
+def run_native(fmu: Path = scenario.FMU_PATH, importer: str = "native") -> Result:
+    """The project's C host, in a bare environment, on the cross-check input."""
     from hosts import native
 
     with tempfile.TemporaryDirectory(prefix="piezo_native_") as scratch:
@@ -331,7 +347,7 @@ def run_native(fmu: Path = scenario.FMU_PATH) -> Result:
                for name, values in outputs.items()}
     times = scenario.grid()
     steps = [(float(times[k]), float(times[k + 1] - times[k])) for k in range(len(times) - 1)]
-    return Result("native", time, outputs, steps)
+    return Result(importer, time, outputs, steps)
 
 
 RUNNERS: dict[str, Callable[..., Result]] = {
@@ -340,10 +356,16 @@ RUNNERS: dict[str, Callable[..., Result]] = {
     "libcosim": run_libcosim,
     "ecos": run_ecos,
     "native": run_native,
+    "fmpy-fmi3": lambda fmu=scenario.FMU3_PATH: run_fmpy(fmu, importer="fmpy-fmi3"),
+    "ecos-fmi3": lambda fmu=scenario.FMU3_PATH: run_ecos(fmu, importer="ecos-fmi3"),
+    "native-fmi3": lambda fmu=scenario.FMU3_PATH: run_native(fmu, importer="native-fmi3"),
 }
+#: The FMU each importer runs by default.
+DEFAULT_FMUS = {importer: scenario.FMU3_PATH if importer.endswith("-fmi3") else scenario.FMU_PATH
+                for importer in IMPORTERS}
 
 
-def run(importer: str, fmu: Path = scenario.FMU_PATH) -> Result:
+def run(importer: str, fmu: Optional[Path] = None) -> Result:
     if importer not in RUNNERS:
         raise ValueError(f"unknown importer {importer!r}; known: {', '.join(RUNNERS)}")
-    return RUNNERS[importer](fmu)
+    return RUNNERS[importer](DEFAULT_FMUS[importer] if fmu is None else fmu)

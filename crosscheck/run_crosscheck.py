@@ -5,9 +5,11 @@ Usage (from the repository root, with the project's Python)::
     python crosscheck/run_crosscheck.py IMPORTER [IMPORTER ...] [--fmu PATH] [--out DIR]
     python crosscheck/run_crosscheck.py --write      # rewrite _in.csv, _ref.opt and _ref.csv
 
-IMPORTER is one of ``fmpy``, ``libcosim``, ``ecos``, ``native`` (the project's C host) or
+IMPORTER is one of ``fmpy``, ``libcosim``, ``ecos``, ``native`` (the project's C host),
 ``fmpy-simulate`` (fmpy's own ``simulate_fmu``; see ReadMe.md for why it is not bit-identical
-to the others). ``all`` runs the first four. For each importer the script prints the worst relative
+to the others), or ``fmpy-fmi3``, ``ecos-fmi3`` and ``native-fmi3`` (the FMI 3.0 FMU in fmpy, ecos
+and the C host). ``all``
+runs all but ``fmpy-simulate``. For each importer the script prints the worst relative
 deviation of every output from ``PiezoImpactDamper_ref.csv`` (the band is defined in ReadMe.md
 and in :mod:`crosscheck.scenario`), whether the result is bit-identical to the reference, and
 ``PASS`` or ``FAIL``; with ``--out`` it writes ``<importer>_out.csv`` there. The exit status is
@@ -25,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from crosscheck import importers, scenario  # noqa: E402
 
-DEFAULT_SET = ("fmpy", "libcosim", "ecos", "native")
+DEFAULT_SET = ("fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3", "native-fmi3")
 
 
 def write_files(fmu: Path) -> None:
@@ -38,7 +40,7 @@ def write_files(fmu: Path) -> None:
     print(f"wrote {scenario.IN_CSV.name}, {scenario.REF_OPT.name}, {scenario.REF_CSV.name} ({size} bytes)")
 
 
-def check(importer: str, fmu: Path, out: Path | None = None) -> bool:
+def check(importer: str, fmu: Path | None, out: Path | None = None) -> bool:
     options = scenario.read_opt()
     ref_time, ref = scenario.read_reference()
     if (ref_time[0], ref_time[-1]) != (options["StartTime"], options["StopTime"]):
@@ -63,12 +65,13 @@ def check(importer: str, fmu: Path, out: Path | None = None) -> bool:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("importers", nargs="*", help=f"importers: {', '.join(importers.IMPORTERS)} or all")
-    parser.add_argument("--fmu", type=Path, default=scenario.FMU_PATH, help="the FMU (default: %(default)s)")
+    parser.add_argument("--fmu", type=Path, default=None,
+                        help=f"the FMU (default: {scenario.FMU_PATH.name}, {scenario.FMU3_PATH.name} for the -fmi3 importers)")
     parser.add_argument("--out", type=Path, default=None, help="write <importer>_out.csv into this folder")
     parser.add_argument("--write", action="store_true", help="rewrite the input, options and reference files")
     args = parser.parse_args(argv)
     if args.write:
-        write_files(args.fmu)
+        write_files(args.fmu or scenario.FMU_PATH)
         return 0
     chosen = []
     for name in args.importers or ["all"]:

@@ -44,6 +44,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 MODEL_NAME = "PiezoImpactDamper"
 FMU_PATH = REPO / "fmus" / f"{MODEL_NAME}.fmu"
+#: The same model as an FMI 3.0 FMU: the same bits in co-simulation.
+FMU3_PATH = REPO / "fmus" / f"{MODEL_NAME}3.fmu"
 IN_CSV = HERE / f"{MODEL_NAME}_in.csv"
 REF_CSV = HERE / f"{MODEL_NAME}_ref.csv"
 REF_OPT = HERE / f"{MODEL_NAME}_ref.opt"

@@ -203,7 +203,7 @@ def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance
     files = {"csv": out / "load_sweep.csv", "json": out / "load_sweep.json", "table": out / "load_sweep.md"}
     write_csv(files["csv"], {key: [row[key] for row in rows] for key in rows[0] if key != "seconds"})
     summary = {
-        "case": "nominal (MODEL.md section 7) from the release; every point one run from t = 0",
+        "case": "nominal (docs/model.md section 7) from the release; every point one run from t = 0",
         "duration_s": stop_time,
         "communication_step_s": step,
         "loads_ohm": list(loads),

@@ -1,4 +1,4 @@
-"""The nominal case (MODEL.md section 7, the paper's Fig. 3), run through the FMU with fmpy.
+"""The nominal case (docs/model.md section 7, the paper's Fig. 3), run through the FMU with fmpy.
 
 Table 1 with ``p(0) = q(0) = 10 mm``, base at rest, ``R_L = 52 kOhm``: the FMU's start values.
 Writes into the results folder:
@@ -14,18 +14,14 @@ Without the damper: the same FMU and the same main mass ``M`` on ``K`` and ``C``
 checks that it made no impact). The impact mass then exerts no force at all, which is the main
 mass alone.
 
-Run it with ``piezo-fmu nominal`` or ``python -m harness.nominal``.
+Run it with ``piezo-fmu nominal`` (or ``python -m harness nominal``).
 """
 
 from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
-
-if __package__ in (None, ""):  # run as a script: python harness/nominal.py
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np
 from fmpy import simulate_fmu
@@ -117,7 +113,7 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     files.update(fig3a=fig3a, fig3b=fig3b)
 
     summary = {
-        "case": "nominal (MODEL.md section 7): Table 1, p(0) = q(0) = 10 mm, base at rest, R_load = 52 kOhm",
+        "case": "nominal (docs/model.md section 7): Table 1, p(0) = q(0) = 10 mm, base at rest, R_load = 52 kOhm",
         "duration_s": stop_time,
         "communication_step_s": step,
         **metrics_at_end(with_damper),
@@ -150,13 +146,3 @@ def summary_lines(summary: dict) -> list[str]:
         f"  energy ledger    {summary['energy_balance_error_J']:.2e} J residual",
         f"  files in         {Path(summary['files']['summary']).parent}",
     ]
-
-
-def main(argv=None) -> int:
-    from harness.cli import main as cli_main
-
-    return cli_main(["nominal", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":
-    sys.exit(main())

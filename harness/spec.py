@@ -27,7 +27,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-#: Default duration of a run (s): the paper does not state its own; MODEL.md section 7.
+#: Default duration of a run (s): the paper does not state its own; docs/model.md section 7.
 DEFAULT_STOP_TIME = 2.0
 #: Default communication step of a sweep (s). Sweeps keep only end-of-run metrics, which the
 #: FMU computes exactly whatever the step (its events are located exactly, and a run chopped

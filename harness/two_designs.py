@@ -111,7 +111,7 @@ def markdown_table(result: dict) -> str:
         "",
         "DI is eq. 29 (first two positive maxima of the main mass); V_rms is eq. 30 over the completed impacts.",
         "Absolute voltages from eqs. 25-28 with Table 1 come out one to two orders of magnitude above the",
-        "paper's few volts (MODEL.md section 8: its unit handling is not recoverable); DI and the ratios",
+        "paper's few volts (docs/model.md section 8: its unit handling is not recoverable); DI and the ratios",
         "between the designs are the comparable part.",
         "",
     ])

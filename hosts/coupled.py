@@ -180,7 +180,7 @@ def run_ssp_ecos(step: float = STEP_SIZE, stop: float = STOP_TIME, damper: Path 
 def damper_energy(run: Run) -> np.ndarray:
     """The damper's stored energy at every sample, rebuilt from its outputs (see module doc)."""
     from piezo_fmu import Parameters
-    from piezo_fmu.barrier import derive_barrier
+    from piezo_fmu.model.barrier import derive_barrier
 
     params = Parameters(**DAMPER_START)
     barrier = derive_barrier(params)

@@ -1,10 +1,15 @@
-"""Build and run the project's C host (``hosts/native_host.c``) under its launcher.
+"""Build and run the project's C host (``hosts/native_host.c``) as a user's native tool runs.
 
-The host is compiled with the system C compiler (``cc``, or ``$CC``) against the FMI 2.0 headers
-that fmpy ships (``fmpy/c-code``: ``fmi2FunctionTypes.h`` and ``fmi2TypesPlatform.h``, the
-standard's BSD-licensed headers), and run through ``hosts/run_native_host.sh``, which puts
-libpython into the process (see that script). The FMU archive is extracted to a scratch folder
-for the run.
+The host is compiled with the system C compiler (``cc``, or ``$CC``) against the FMI 2.0 and
+3.0 headers that fmpy ships (``fmpy/c-code``, the standard's BSD-licensed headers), and run in a
+bare environment: nothing but ``PATH``, which holds the Python with numpy that the FMU's loader
+is to find (``python3`` in the folder of the given interpreter, a virtual environment's
+``bin``). No ``LD_PRELOAD``, ``PYTHONHOME`` or ``PYTHONPATH``: the FMU finds Python itself. The
+FMU archive is extracted to a scratch folder for the run. ``hosts/run_native_host.sh`` remains
+for those who prefer to put libpython into a host themselves.
+
+It imports nothing of ``piezo_fmu``: a process that has run an FMU may hold the FMU's bundled copy
+of the package under that name.
 """
 
 from __future__ import annotations
@@ -16,21 +21,27 @@ import sys
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "native_host.c"
 LAUNCHER = HERE / "run_native_host.sh"
 BUILD_DIR = HERE.parent / "build" / "hosts"
+#: The system's folders that a bare environment's PATH keeps after the chosen Python's.
+SYSTEM_PATH = "/usr/bin:/bin"
+#: Variables a bare environment keeps from this process: they choose numpy's and OpenBLAS's
+#: kernels (``OPENBLAS_CORETYPE``, ...), which decide the last bits of the core's products, so
+#: that the host computes with the same kernels as a Python importer in this process.
+KERNEL_PREFIXES = ("OPENBLAS_", "NPY_")
 
 
 def fmi_headers() -> Path:
-    """The folder with fmpy's copy of the FMI 2.0 headers."""
+    """The folder with fmpy's copy of the FMI 2.0 and 3.0 headers."""
     import fmpy
 
     folder = Path(fmpy.__file__).resolve().parent / "c-code"
-    if not (folder / "fmi2FunctionTypes.h").is_file():
-        raise FileNotFoundError(f"no FMI 2.0 headers in {folder}")
+    if not (folder / "fmi3FunctionTypes.h").is_file():
+        raise FileNotFoundError(f"no FMI headers in {folder}")
     return folder
 
 
@@ -53,27 +64,35 @@ def build(dest: Optional[Path] = None) -> Path:
     return dest
 
 
-def environment(python: Optional[str] = None) -> dict[str, str]:
-    """The process environment with ``PYTHON`` set for the launcher."""
-    env = dict(os.environ)
-    env["PYTHON"] = python or sys.executable
-    return env
+def environment(python: Optional[str] = None, extra: Optional[Mapping[str, str]] = None) -> dict[str, str]:
+    """A bare environment whose ``PATH`` finds ``python3`` = ``python`` (default: this interpreter).
+
+    It has the numerical-kernel settings of this process (``KERNEL_PREFIXES``) and ``extra``
+    (``PIEZO_FMU_PYTHON``, for example), and nothing else.
+    """
+    folder = Path(python or sys.executable).absolute().parent
+    if not os.access(folder / "python3", os.X_OK):
+        raise FileNotFoundError(f"no python3 in {folder}: give the interpreter of a virtual environment")
+    kernels = {key: value for key, value in os.environ.items() if key.startswith(KERNEL_PREFIXES)}
+    return {**kernels, "PATH": f"{folder}:{SYSTEM_PATH}", **(extra or {})}
 
 
 def run(fmu: Path, out_csv: Path, args: Sequence[str] = (), python: Optional[str] = None,
-        executable: Optional[Path] = None, timeout: float = 300.0) -> subprocess.CompletedProcess:
-    """Run the host on ``fmu`` (extracted to a scratch folder) under the launcher.
+        executable: Optional[Path] = None, timeout: float = 300.0,
+        env: Optional[Mapping[str, str]] = None) -> subprocess.CompletedProcess:
+    """Run the host on ``fmu`` (extracted to a scratch folder) in a bare environment.
 
-    Raises ``subprocess.CalledProcessError`` on a non-zero exit; the completed process (with its
-    stdout and stderr) is returned otherwise.
+    ``env`` replaces the environment (default: ``environment(python)``). Raises
+    ``subprocess.CalledProcessError`` on a non-zero exit; the completed process (with its stdout
+    and stderr) is returned otherwise.
     """
     executable = Path(executable) if executable is not None else build()
     with tempfile.TemporaryDirectory(prefix="piezo_fmu_native_") as scratch:
         with zipfile.ZipFile(fmu) as archive:
             archive.extractall(scratch)
-        command = ["sh", str(LAUNCHER), str(executable), scratch, str(out_csv), *args]
-        completed = subprocess.run(command, env=environment(python), capture_output=True, text=True,
-                                   timeout=timeout)
+        command = [str(executable), scratch, str(out_csv), *args]
+        completed = subprocess.run(command, env=dict(env) if env is not None else environment(python),
+                                   capture_output=True, text=True, timeout=timeout)
     if completed.returncode != 0:
         raise subprocess.CalledProcessError(completed.returncode, command, completed.stdout, completed.stderr)
     return completed

@@ -1,10 +1,11 @@
 /*
- * native_host: a small FMI 2.0 co-simulation host in plain C (no Python in it).
+ * native_host: a small FMI co-simulation host in plain C (no Python in it), for FMI 2.0 and 3.0.
  *
- * It loads an extracted FMU's binary (binaries/linux64/<modelIdentifier>.so) with dlopen, runs
- * it over a fixed communication grid through the FMI 2.0 C API and writes every output to a
- * CSV file in the FMI cross-check format ("time" first, quoted names, %.17g so that every
- * double is written exactly).
+ * It loads an extracted FMU's binary with dlopen (binaries/linux64/<modelIdentifier>.so for FMI
+ * 2.0, binaries/x86_64-linux/<modelIdentifier>.so for FMI 3.0; the version is the
+ * modelDescription's fmiVersion), runs it over a fixed communication grid through the FMI C API
+ * and writes every output to a CSV file in the FMI cross-check format ("time" first, quoted
+ * names, %.17g so that every double is written exactly).
  *
  *   native_host FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV]
  *                               [--set NAME=VALUE]...
@@ -16,16 +17,18 @@
  * --in     input CSV ("time" first, then one column per input, by name); values between two
  *          rows are linearly interpolated (FMI cross-check rules); a row at the exact grid time
  *          is used as it is.
- * --set    a start value for a parameter or input, by name (Real or Integer).
+ * --set    a start value for a parameter or input, by name (Real/Float64 or Integer/Int32).
  *
  * The communication grid is the one of OSP libcosim, which counts time in integer nanoseconds:
  * t_k = start + (k * step_ns) / 1e9 (the double nearest to k * step), and the step passed to
- * fmi2DoStep is t_{k+1} - t_k. The inputs of step k are those at t_k; they are set before
- * fmi2DoStep. Row k of the output is read after the step to t_k.
+ * DoStep is t_{k+1} - t_k. The inputs of step k are those at t_k; they are set before DoStep.
+ * Row k of the output is read after the step to t_k.
  *
- * The FMU's binary is loaded with RTLD_NOW | RTLD_LOCAL. A pythonfmu FMU needs libpython in the
- * process (its binary does not link it); hosts/run_native_host.sh is the launcher that provides
- * it. Exit status: 0 on success, 1 on a usage or FMU error.
+ * Any call that returns a status other than OK is an error: the host says which call and which
+ * status, and exits with status 1 (so does an FMI 3.0 step that asks to terminate). The FMU's
+ * messages go to stderr. The binary is loaded with RTLD_NOW | RTLD_LOCAL into a process that
+ * has no Python: the project's FMUs find one themselves (their loader). Exit status: 0 on
+ * success, 1 on a usage or FMU error.
  */
 
 #define _XOPEN_SOURCE 700
@@ -41,6 +44,7 @@
 #include <unistd.h>
 
 #include "fmi2FunctionTypes.h"
+#include "fmi3FunctionTypes.h"
 
 #define MAX_VARS 512
 #define MAX_SETS 64
@@ -50,13 +54,14 @@ typedef struct {
     char name[128];
     unsigned int vr;
     char causality[16];
-    char type[16]; /* "Real", "Integer", "Boolean", "String" */
+    char type[16]; /* "Real" (FMI 3.0 Float64), "Integer" (Int32), or the type's own name */
 } Variable;
 
 typedef struct {
     Variable vars[MAX_VARS];
     int n;
-    char guid[128];
+    int fmi_version; /* 2 or 3 */
+    char guid[128];  /* FMI 3.0: the instantiationToken */
     char model_identifier[128];
     double default_stop;
     int has_default_stop;
@@ -130,6 +135,27 @@ static int attribute(const char *tag, const char *name, char *out, size_t out_si
     return 0;
 }
 
+/* The FMI type element of a variable (FMI 2.0: the child of ScalarVariable, FMI 3.0: the
+ * variable's own element) that starts at p, if it is one of `types`. */
+static const char *type_at(const char *p, const char *const types[], size_t ntypes)
+{
+    for (size_t i = 0; i < ntypes; i++) {
+        size_t n = strlen(types[i]);
+        if (p[0] == '<' && strncmp(p + 1, types[i], n) == 0 && strchr(" \t\r\n/>", p[n + 1])) return types[i];
+    }
+    return NULL;
+}
+
+static void read_variable(const char *tag, const char *type, Variable *v)
+{
+    char vr[32];
+    if (!attribute(tag, "name", v->name, sizeof v->name) || !attribute(tag, "valueReference", vr, sizeof vr))
+        die("a variable without name or valueReference");
+    v->vr = (unsigned int)strtoul(vr, NULL, 10);
+    if (!attribute(tag, "causality", v->causality, sizeof v->causality)) strcpy(v->causality, "local");
+    snprintf(v->type, sizeof v->type, "%s", type);
+}
+
 static void parse_model_description(const char *fmu_dir, ModelDescription *md)
 {
     char path[PATH_MAX];
@@ -138,8 +164,12 @@ static void parse_model_description(const char *fmu_dir, ModelDescription *md)
     memset(md, 0, sizeof *md);
 
     const char *root = strstr(xml, "<fmiModelDescription");
-    if (!root || !attribute(root, "guid", md->guid, sizeof md->guid))
-        die("no guid in %s", path);
+    char version[16];
+    if (!root || !attribute(root, "fmiVersion", version, sizeof version)) die("no fmiVersion in %s", path);
+    md->fmi_version = strncmp(version, "3.", 2) == 0 ? 3 : strcmp(version, "2.0") == 0 ? 2 : 0;
+    if (!md->fmi_version) die("%s: FMI version %s (this host runs 2.0 and 3.0)", path, version);
+    if (!attribute(root, md->fmi_version == 2 ? "guid" : "instantiationToken", md->guid, sizeof md->guid))
+        die("no %s in %s", md->fmi_version == 2 ? "guid" : "instantiationToken", path);
     const char *cs = strstr(xml, "<CoSimulation");
     if (!cs || !attribute(cs, "modelIdentifier", md->model_identifier, sizeof md->model_identifier))
         die("%s declares no CoSimulation modelIdentifier", path);
@@ -150,31 +180,30 @@ static void parse_model_description(const char *fmu_dir, ModelDescription *md)
         md->has_default_stop = 1;
     }
 
-    for (const char *p = strstr(xml, "<ScalarVariable"); p; p = strstr(p + 1, "<ScalarVariable")) {
-        if (md->n == MAX_VARS) die("more than %d variables", MAX_VARS);
-        Variable *v = &md->vars[md->n];
-        char vr[32];
-        if (!attribute(p, "name", v->name, sizeof v->name) || !attribute(p, "valueReference", vr, sizeof vr))
-            die("a ScalarVariable without name or valueReference");
-        v->vr = (unsigned int)strtoul(vr, NULL, 10);
-        if (!attribute(p, "causality", v->causality, sizeof v->causality))
-            strcpy(v->causality, "local");
-        const char *body = strchr(p, '>');
+    if (md->fmi_version == 2) {
         const char *types[] = {"Real", "Integer", "Boolean", "String", "Enumeration"};
-        v->type[0] = '\0';
-        for (size_t i = 0; body && i < sizeof types / sizeof *types; i++) {
-            char open[32];
-            snprintf(open, sizeof open, "<%s", types[i]);
-            const char *q = body + 1;
+        for (const char *p = strstr(xml, "<ScalarVariable"); p; p = strstr(p + 1, "<ScalarVariable")) {
+            if (md->n == MAX_VARS) die("more than %d variables", MAX_VARS);
+            const char *body = strchr(p, '>');
+            const char *q = body ? body + 1 : p;
             while (*q == ' ' || *q == '\n' || *q == '\r' || *q == '\t') q++;
-            if (strncmp(q, open, strlen(open)) == 0 && (q[strlen(open)] == ' ' || q[strlen(open)] == '/' ||
-                                                        q[strlen(open)] == '>')) {
-                strcpy(v->type, strcmp(types[i], "Enumeration") == 0 ? "Integer" : types[i]);
-                break;
-            }
+            const char *type = body ? type_at(q, types, sizeof types / sizeof *types) : NULL;
+            char name[128] = "?";
+            attribute(p, "name", name, sizeof name);
+            if (!type) die("variable %s has no type element", name);
+            read_variable(p, strcmp(type, "Enumeration") == 0 ? "Integer" : type, &md->vars[md->n++]);
         }
-        if (!v->type[0]) die("variable %s has no type element", v->name);
-        md->n++;
+    } else {
+        const char *types[] = {"Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
+                               "Int64", "UInt64", "Boolean", "String", "Binary", "Clock", "Enumeration"};
+        const char *begin = strstr(xml, "<ModelVariables"), *end = begin ? strstr(begin, "</ModelVariables>") : NULL;
+        for (const char *p = begin; p && p < end; p = strchr(p + 1, '<')) {
+            const char *type = type_at(p, types, sizeof types / sizeof *types);
+            if (!type) continue;
+            if (md->n == MAX_VARS) die("more than %d variables", MAX_VARS);
+            const char *kind = strcmp(type, "Float64") == 0 ? "Real" : strcmp(type, "Int32") == 0 ? "Integer" : type;
+            read_variable(p, kind, &md->vars[md->n++]);
+        }
     }
     free(xml);
 }
@@ -216,7 +245,7 @@ static void read_inputs(const char *path, const ModelDescription *md, InputTable
         int index = find_variable(md, name);
         if (index < 0 || strcmp(md->vars[index].causality, "input") != 0)
             die("%s: \"%s\" is not an input of the FMU", path, name);
-        if (strcmp(md->vars[index].type, "Real") != 0) die("%s: input %s is not Real", path, name);
+        if (strcmp(md->vars[index].type, "Real") != 0) die("%s: input %s is not Real/Float64", path, name);
         in->var_index[in->ncols++] = index;
     }
 
@@ -271,16 +300,29 @@ static double input_at(const InputTable *in, int c, double t)
     return w0 * v0 + (1.0 - w0) * v1;
 }
 
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...)
+static const char *status_name(int status)
+{
+    static const char *const names[] = {"OK", "Warning", "Discard", "Error", "Fatal", "Pending"};
+    return status >= 0 && status < 6 ? names[status] : "unknown";
+}
+
+static void logger2(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                    fmi2String category, fmi2String message, ...)
 {
     (void)env;
     va_list ap;
     va_start(ap, message);
-    fprintf(stderr, "[%s] %s (status %d): ", instance ? instance : "?", category ? category : "", (int)status);
+    fprintf(stderr, "[%s] %s (%s): ", instance ? instance : "?", category ? category : "", status_name(status));
     vfprintf(stderr, message, ap);
     fprintf(stderr, "\n");
     va_end(ap);
+}
+
+static void logger3(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category, fmi3String message)
+{
+    (void)env;
+    fprintf(stderr, "[native_host] %s (%s): %s\n", category ? category : "", status_name(status),
+            message ? message : "");
 }
 
 static void *symbol(void *lib, const char *name)
@@ -290,9 +332,183 @@ static void *symbol(void *lib, const char *name)
     return s;
 }
 
-static void check(fmi2Status status, const char *what)
+/* Anything but OK is an error. */
+static void check(int status, const char *what)
 {
-    if (status != fmi2OK && status != fmi2Warning) die("%s failed with status %d", what, (int)status);
+    if (status != 0) die("%s returned %s (%d)", what, status_name(status), status);
+}
+
+/* The FMU's co-simulation interface, whichever its FMI version. */
+typedef struct {
+    int version;
+    void *c; /* the instance */
+    fmi2SetRealTYPE *set_real2;
+    fmi2SetIntegerTYPE *set_integer2;
+    fmi2GetRealTYPE *get_real2;
+    fmi2GetIntegerTYPE *get_integer2;
+    fmi2SetupExperimentTYPE *setup2;
+    fmi2EnterInitializationModeTYPE *enter_init2;
+    fmi2ExitInitializationModeTYPE *exit_init2;
+    fmi2DoStepTYPE *do_step2;
+    fmi2TerminateTYPE *terminate2;
+    fmi2FreeInstanceTYPE *free2;
+    fmi3SetFloat64TYPE *set_real3;
+    fmi3SetInt32TYPE *set_integer3;
+    fmi3GetFloat64TYPE *get_real3;
+    fmi3GetInt32TYPE *get_integer3;
+    fmi3EnterInitializationModeTYPE *enter_init3;
+    fmi3ExitInitializationModeTYPE *exit_init3;
+    fmi3DoStepTYPE *do_step3;
+    fmi3TerminateTYPE *terminate3;
+    fmi3FreeInstanceTYPE *free3;
+} Fmu;
+
+static void instantiate(Fmu *fmu, void *lib, const ModelDescription *md, const char *abs_dir)
+{
+    char resources[PATH_MAX + 32];
+    fmu->version = md->fmi_version;
+    if (fmu->version == 2) {
+        fmi2GetVersionTYPE *get_version = (fmi2GetVersionTYPE *)symbol(lib, "fmi2GetVersion");
+        if (strcmp(get_version(), "2.0") != 0) die("the binary implements FMI %s, not 2.0", get_version());
+        fmu->set_real2 = (fmi2SetRealTYPE *)symbol(lib, "fmi2SetReal");
+        fmu->set_integer2 = (fmi2SetIntegerTYPE *)symbol(lib, "fmi2SetInteger");
+        fmu->get_real2 = (fmi2GetRealTYPE *)symbol(lib, "fmi2GetReal");
+        fmu->get_integer2 = (fmi2GetIntegerTYPE *)symbol(lib, "fmi2GetInteger");
+        fmu->setup2 = (fmi2SetupExperimentTYPE *)symbol(lib, "fmi2SetupExperiment");
+        fmu->enter_init2 = (fmi2EnterInitializationModeTYPE *)symbol(lib, "fmi2EnterInitializationMode");
+        fmu->exit_init2 = (fmi2ExitInitializationModeTYPE *)symbol(lib, "fmi2ExitInitializationMode");
+        fmu->do_step2 = (fmi2DoStepTYPE *)symbol(lib, "fmi2DoStep");
+        fmu->terminate2 = (fmi2TerminateTYPE *)symbol(lib, "fmi2Terminate");
+        fmu->free2 = (fmi2FreeInstanceTYPE *)symbol(lib, "fmi2FreeInstance");
+        fmi2InstantiateTYPE *instantiate2 = (fmi2InstantiateTYPE *)symbol(lib, "fmi2Instantiate");
+        static fmi2CallbackFunctions callbacks = {logger2, calloc, free, NULL, NULL};
+        snprintf(resources, sizeof resources, "file://%s/resources", abs_dir);
+        fmu->c = instantiate2("native_host", fmi2CoSimulation, md->guid, resources, &callbacks, fmi2False, fmi2True);
+    } else {
+        fmi3GetVersionTYPE *get_version = (fmi3GetVersionTYPE *)symbol(lib, "fmi3GetVersion");
+        if (strncmp(get_version(), "3.", 2) != 0) die("the binary implements FMI %s, not 3.0", get_version());
+        fmu->set_real3 = (fmi3SetFloat64TYPE *)symbol(lib, "fmi3SetFloat64");
+        fmu->set_integer3 = (fmi3SetInt32TYPE *)symbol(lib, "fmi3SetInt32");
+        fmu->get_real3 = (fmi3GetFloat64TYPE *)symbol(lib, "fmi3GetFloat64");
+        fmu->get_integer3 = (fmi3GetInt32TYPE *)symbol(lib, "fmi3GetInt32");
+        fmu->enter_init3 = (fmi3EnterInitializationModeTYPE *)symbol(lib, "fmi3EnterInitializationMode");
+        fmu->exit_init3 = (fmi3ExitInitializationModeTYPE *)symbol(lib, "fmi3ExitInitializationMode");
+        fmu->do_step3 = (fmi3DoStepTYPE *)symbol(lib, "fmi3DoStep");
+        fmu->terminate3 = (fmi3TerminateTYPE *)symbol(lib, "fmi3Terminate");
+        fmu->free3 = (fmi3FreeInstanceTYPE *)symbol(lib, "fmi3FreeInstance");
+        fmi3InstantiateCoSimulationTYPE *instantiate3 =
+            (fmi3InstantiateCoSimulationTYPE *)symbol(lib, "fmi3InstantiateCoSimulation");
+        snprintf(resources, sizeof resources, "%s/resources/", abs_dir);
+        fmu->c = instantiate3("native_host", md->guid, resources, fmi3False, fmi3True, fmi3False, fmi3False, NULL, 0,
+                              NULL, logger3, NULL);
+    }
+    if (!fmu->c) die("fmi%dInstantiate%s failed", fmu->version, fmu->version == 3 ? "CoSimulation" : "");
+}
+
+static void set_real(const Fmu *fmu, unsigned int vr, double value, const char *what)
+{
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        check(fmu->set_real2(fmu->c, &r, 1, &value), what);
+    } else {
+        fmi3ValueReference r = vr;
+        check(fmu->set_real3(fmu->c, &r, 1, &value, 1), what);
+    }
+}
+
+static void set_integer(const Fmu *fmu, unsigned int vr, int value, const char *what)
+{
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        fmi2Integer v = value;
+        check(fmu->set_integer2(fmu->c, &r, 1, &v), what);
+    } else {
+        fmi3ValueReference r = vr;
+        fmi3Int32 v = value;
+        check(fmu->set_integer3(fmu->c, &r, 1, &v, 1), what);
+    }
+}
+
+static double get_real(const Fmu *fmu, unsigned int vr)
+{
+    double value;
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        check(fmu->get_real2(fmu->c, &r, 1, &value), "fmi2GetReal");
+    } else {
+        fmi3ValueReference r = vr;
+        check(fmu->get_real3(fmu->c, &r, 1, &value, 1), "fmi3GetFloat64");
+    }
+    return value;
+}
+
+static int get_integer(const Fmu *fmu, unsigned int vr)
+{
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        fmi2Integer value;
+        check(fmu->get_integer2(fmu->c, &r, 1, &value), "fmi2GetInteger");
+        return (int)value;
+    }
+    fmi3ValueReference r = vr;
+    fmi3Int32 value;
+    check(fmu->get_integer3(fmu->c, &r, 1, &value, 1), "fmi3GetInt32");
+    return (int)value;
+}
+
+static void set_inputs(const Fmu *fmu, const InputTable *inputs, const ModelDescription *md, double t)
+{
+    for (int col = 0; col < inputs->ncols; col++)
+        set_real(fmu, md->vars[inputs->var_index[col]].vr, input_at(inputs, col, t), "setting an input");
+}
+
+static void initialize(const Fmu *fmu, double start, double stop, const InputTable *inputs,
+                       const ModelDescription *md)
+{
+    if (fmu->version == 2) {
+        check(fmu->setup2(fmu->c, fmi2False, 0.0, start, fmi2True, stop), "fmi2SetupExperiment");
+        set_inputs(fmu, inputs, md, start);
+        check(fmu->enter_init2(fmu->c), "fmi2EnterInitializationMode");
+        check(fmu->exit_init2(fmu->c), "fmi2ExitInitializationMode");
+    } else {
+        set_inputs(fmu, inputs, md, start);
+        check(fmu->enter_init3(fmu->c, fmi3False, 0.0, start, fmi3True, stop), "fmi3EnterInitializationMode");
+        check(fmu->exit_init3(fmu->c), "fmi3ExitInitializationMode");
+    }
+}
+
+static void do_step(const Fmu *fmu, double t, double h)
+{
+    if (fmu->version == 2) {
+        check(fmu->do_step2(fmu->c, t, h, fmi2True), "fmi2DoStep");
+        return;
+    }
+    fmi3Boolean event = fmi3False, terminate = fmi3False, early = fmi3False;
+    fmi3Float64 last = t;
+    check(fmu->do_step3(fmu->c, t, h, fmi3True, &event, &terminate, &early, &last), "fmi3DoStep");
+    if (terminate) die("fmi3DoStep at t = %.17g asked to terminate the simulation", t);
+}
+
+static void finish(const Fmu *fmu)
+{
+    if (fmu->version == 2) {
+        check(fmu->terminate2(fmu->c), "fmi2Terminate");
+        fmu->free2(fmu->c);
+    } else {
+        check(fmu->terminate3(fmu->c), "fmi3Terminate");
+        fmu->free3(fmu->c);
+    }
+}
+
+static void write_row(FILE *out, const Fmu *fmu, const ModelDescription *md, const int *outputs, int nout, double t)
+{
+    fprintf(out, "%.17g", t);
+    for (int j = 0; j < nout; j++) {
+        const Variable *v = &md->vars[outputs[j]];
+        if (v->type[0] == 'R') fprintf(out, ",%.17g", get_real(fmu, v->vr));
+        else fprintf(out, ",%d", get_integer(fmu, v->vr));
+    }
+    fprintf(out, "\n");
 }
 
 int main(int argc, char **argv)
@@ -329,51 +545,29 @@ int main(int argc, char **argv)
     InputTable inputs = {0};
     if (in_path) read_inputs(in_path, md, &inputs);
 
-    char abs_dir[PATH_MAX], library[PATH_MAX + 256], resources[PATH_MAX + 32];
+    char abs_dir[PATH_MAX], library[PATH_MAX + 256];
     if (!realpath(fmu_dir, abs_dir)) die("cannot resolve %s", fmu_dir);
-    snprintf(library, sizeof library, "%s/binaries/linux64/%s.so", abs_dir, md->model_identifier);
-    snprintf(resources, sizeof resources, "file://%s/resources", abs_dir);
-
+    snprintf(library, sizeof library, "%s/binaries/%s/%s.so", abs_dir,
+             md->fmi_version == 2 ? "linux64" : "x86_64-linux", md->model_identifier);
     void *lib = dlopen(library, RTLD_NOW | RTLD_LOCAL);
     if (!lib) die("dlopen failed: %s", dlerror());
 
-    fmi2InstantiateTYPE *instantiate = (fmi2InstantiateTYPE *)symbol(lib, "fmi2Instantiate");
-    fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)symbol(lib, "fmi2FreeInstance");
-    fmi2SetupExperimentTYPE *setup = (fmi2SetupExperimentTYPE *)symbol(lib, "fmi2SetupExperiment");
-    fmi2EnterInitializationModeTYPE *enter_init =
-        (fmi2EnterInitializationModeTYPE *)symbol(lib, "fmi2EnterInitializationMode");
-    fmi2ExitInitializationModeTYPE *exit_init =
-        (fmi2ExitInitializationModeTYPE *)symbol(lib, "fmi2ExitInitializationMode");
-    fmi2TerminateTYPE *terminate = (fmi2TerminateTYPE *)symbol(lib, "fmi2Terminate");
-    fmi2SetRealTYPE *set_real = (fmi2SetRealTYPE *)symbol(lib, "fmi2SetReal");
-    fmi2SetIntegerTYPE *set_integer = (fmi2SetIntegerTYPE *)symbol(lib, "fmi2SetInteger");
-    fmi2GetRealTYPE *get_real = (fmi2GetRealTYPE *)symbol(lib, "fmi2GetReal");
-    fmi2GetIntegerTYPE *get_integer = (fmi2GetIntegerTYPE *)symbol(lib, "fmi2GetInteger");
-    fmi2DoStepTYPE *do_step = (fmi2DoStepTYPE *)symbol(lib, "fmi2DoStep");
-    fmi2GetVersionTYPE *get_version = (fmi2GetVersionTYPE *)symbol(lib, "fmi2GetVersion");
-    if (strcmp(get_version(), "2.0") != 0) die("the binary implements FMI %s, not 2.0", get_version());
-
-    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("native_host", fmi2CoSimulation, md->guid, resources, &callbacks,
-                                  fmi2False, fmi2True);
-    if (!c) die("fmi2Instantiate failed");
+    Fmu fmu = {0};
+    instantiate(&fmu, lib, md, abs_dir);
 
     for (int i = 0; i < nsets; i++) {
-        char name[256];
+        char name[256], what[300];
         const char *eq = strchr(sets[i], '=');
         if (!eq || (size_t)(eq - sets[i]) >= sizeof name) die("--set %s: expected NAME=VALUE", sets[i]);
         memcpy(name, sets[i], (size_t)(eq - sets[i]));
         name[eq - sets[i]] = '\0';
         int index = find_variable(md, name);
         if (index < 0) die("--set: the FMU has no variable %s", name);
-        fmi2ValueReference vr = md->vars[index].vr;
-        if (strcmp(md->vars[index].type, "Real") == 0) {
-            fmi2Real value = strtod(eq + 1, NULL);
-            check(set_real(c, &vr, 1, &value), "fmi2SetReal");
-        } else if (strcmp(md->vars[index].type, "Integer") == 0) {
-            fmi2Integer value = (fmi2Integer)strtol(eq + 1, NULL, 10);
-            check(set_integer(c, &vr, 1, &value), "fmi2SetInteger");
-        } else die("--set %s: only Real and Integer variables", name);
+        snprintf(what, sizeof what, "setting %s = %s", name, eq + 1);
+        if (strcmp(md->vars[index].type, "Real") == 0) set_real(&fmu, md->vars[index].vr, strtod(eq + 1, NULL), what);
+        else if (strcmp(md->vars[index].type, "Integer") == 0)
+            set_integer(&fmu, md->vars[index].vr, (int)strtol(eq + 1, NULL, 10), what);
+        else die("--set %s: only Real/Float64 and Integer/Int32 variables", name);
     }
 
     /* the outputs, in model order */
@@ -381,7 +575,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < md->n; i++)
         if (strcmp(md->vars[i].causality, "output") == 0) {
             if (strcmp(md->vars[i].type, "Real") != 0 && strcmp(md->vars[i].type, "Integer") != 0)
-                die("output %s is neither Real nor Integer", md->vars[i].name);
+                die("output %s is neither Real/Float64 nor Integer/Int32", md->vars[i].name);
             outputs[nout++] = i;
         }
 
@@ -391,50 +585,19 @@ int main(int argc, char **argv)
     for (int j = 0; j < nout; j++) fprintf(out, ",\"%s\"", md->vars[outputs[j]].name);
     fprintf(out, "\n");
 
-    #define SET_INPUTS(t)                                                                  \
-        for (int col = 0; col < inputs.ncols; col++) {                                     \
-            fmi2ValueReference vr = md->vars[inputs.var_index[col]].vr;                    \
-            fmi2Real value = input_at(&inputs, col, (t));                                  \
-            check(set_real(c, &vr, 1, &value), "fmi2SetReal (input)");                      \
-        }
-
-    #define WRITE_ROW(t)                                                                   \
-        do {                                                                               \
-            fprintf(out, "%.17g", (t));                                                    \
-            for (int j = 0; j < nout; j++) {                                               \
-                const Variable *v = &md->vars[outputs[j]];                                 \
-                fmi2ValueReference vr = v->vr;                                             \
-                if (v->type[0] == 'R') {                                                   \
-                    fmi2Real value;                                                        \
-                    check(get_real(c, &vr, 1, &value), "fmi2GetReal");                     \
-                    fprintf(out, ",%.17g", value);                                         \
-                } else {                                                                   \
-                    fmi2Integer value;                                                     \
-                    check(get_integer(c, &vr, 1, &value), "fmi2GetInteger");               \
-                    fprintf(out, ",%d", (int)value);                                       \
-                }                                                                          \
-            }                                                                              \
-            fprintf(out, "\n");                                                            \
-        } while (0)
-
     long long start_ns = llround(start * 1e9);
     double t = (double)start_ns / 1e9;
-    check(setup(c, fmi2False, 0.0, t, fmi2True, stop), "fmi2SetupExperiment");
-    SET_INPUTS(t);
-    check(enter_init(c), "fmi2EnterInitializationMode");
-    check(exit_init(c), "fmi2ExitInitializationMode");
-    WRITE_ROW(t);
-
+    initialize(&fmu, t, stop, &inputs, md);
+    write_row(out, &fmu, md, outputs, nout, t);
     for (long long k = 0; k < nsteps; k++) {
         double t_next = (double)(start_ns + (k + 1) * step_ns) / 1e9;
-        SET_INPUTS(t);
-        check(do_step(c, t, t_next - t, fmi2True), "fmi2DoStep");
+        set_inputs(&fmu, &inputs, md, t);
+        do_step(&fmu, t, t_next - t);
         t = t_next;
-        WRITE_ROW(t);
+        write_row(out, &fmu, md, outputs, nout, t);
     }
 
-    check(terminate(c), "fmi2Terminate");
-    free_instance(c);
+    finish(&fmu);
     if (fclose(out) != 0) die("cannot close %s", out_path);
     free(inputs.time);
     free(inputs.values);

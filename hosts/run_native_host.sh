@@ -1,22 +1,23 @@
 #!/bin/sh
-# Launcher for a native (non-Python) FMI host that loads a pythonfmu FMU such as
-# fmus/PiezoImpactDamper.fmu.
+# Launcher that puts libpython into a native (non-Python) FMI host, for those who prefer to
+# choose the interpreter this way. No host needs it any more: the project's FMUs find a Python
+# themselves (their loader, src/piezo_fmu/fmi/loader; see the README's "Using the FMU in your
+# simulator"). It remains for other pythonfmu FMUs, whose binary calls the Python C API but does
+# not link libpython and so loads only into a process that has libpython's symbols.
 #
 #   PYTHON=.venv/bin/python hosts/run_native_host.sh PROGRAM [ARGS...]
 #
-# A pythonfmu binary (binaries/linux64/*.so) calls the Python C API but does not link libpython:
-# it expects to be loaded into a process that already has libpython's symbols. A Python host
-# (fmpy, libcosimpy, ecospy) has them; a plain C or C++ host does not, and dlopen of the FMU
-# fails with "undefined symbol: _Py_NoneStruct". The recipe, for the Python interpreter $PYTHON
-# (default: python3 on PATH) whose packages the FMU is to use (numpy):
+# For the Python interpreter $PYTHON (default: python3 on PATH) whose packages the FMU is to use
+# (numpy), it sets
 #
 #   LD_PRELOAD=<libpython of $PYTHON>     the shared libpython, e.g. .../lib/libpython3.11.so.1.0
 #   PYTHONHOME=<sys.base_prefix>          where the embedded interpreter finds its standard library
 #   PYTHONPATH=<site-packages of $PYTHON> where it finds numpy (a venv's own packages)
 #
-# The Python must be built with --enable-shared (Debian's python3 is; so are pyenv builds made
-# with PYTHON_CONFIGURE_OPTS=--enable-shared, as on this project's machines). The launcher exits
-# with status 127 and a message when it cannot find the shared library.
+# and the project's FMUs then use that interpreter as they use a Python host's. The Python must
+# be built with --enable-shared (Debian's python3 is; so are pyenv builds made with
+# PYTHON_CONFIGURE_OPTS=--enable-shared, as on this project's machines). The launcher exits with
+# status 127 and a message when it cannot find the shared library.
 set -eu
 
 if [ "$#" -lt 1 ]; then

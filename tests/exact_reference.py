@@ -1,11 +1,11 @@
 """A 30-digit reference for the piezo-impact damper with the base at rest.
 
-Written from MODEL.md sections 1-3, 5 (quasi-static voltage) and 6; it shares nothing with the
+Written from docs/model.md sections 1-3, 5 (quasi-static voltage) and 6; it shares nothing with the
 core's integrator, and nothing with the DOP853 reference (``reference.py``) but the order of the
 events. Each phase is linear, so its flow is exact: on ``x = (p, q, p', q', 1)``,
 ``x(t0 + tau) = expm(A tau) x(t0)``, with mpmath's matrix exponential at 30 significant digits.
 
-The events are the roots, on that flow, of the event functions of MODEL.md: onset
+The events are the roots, on that flow, of the event functions of docs/model.md: onset
 ``s (q - p) - d/2``, separation ``delta``, the peak of ``delta`` (zero of ``delta'``) and the
 maxima of ``p`` (zeros of ``p'``). mpmath's root finder locates each one at 30 digits, starting
 from the time the DOP853 reference gives for it; a root more than ``SEED_DISTANCE`` from its

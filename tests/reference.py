@@ -1,6 +1,6 @@
 """An independent high-accuracy reference for the piezo-impact damper.
 
-Written from MODEL.md sections 1-3, 5 (quasi-static voltage) and 6 only; it shares nothing
+Written from docs/model.md sections 1-3, 5 (quasi-static voltage) and 6 only; it shares nothing
 with the core's integrator (``src/piezo_fmu/simulator.py``) except ``Parameters`` and
 ``derive_barrier`` (which give ``M_eq``, ``K_eq`` and ``k_V``).
 
@@ -55,7 +55,7 @@ and move in its armed direction is ``p' = 0`` (release from rest at ``t = 0``, o
 exactly on a base-hold boundary or produced by a separation jump). A ``p'`` root that lies
 exactly at the start of a segment (within ``4 eps`` of ``t0``, which is where brentq puts a
 root that sits at the bracket end) is dropped when ``p'(t0) <= 0``: either it is the release
-(which is not a maximum, MODEL.md section 6) or it was already recorded at the end of the
+(which is not a maximum, docs/model.md section 6) or it was already recorded at the end of the
 previous segment or at the separation jump.
 
 Switch states. The event time from solve_ivp is a root of the step interpolant; the state

@@ -1,4 +1,4 @@
-"""The circuit voltage models (issue 7; MODEL.md section 5): limits, closed forms, ledger, errors.
+"""The circuit voltage models (issue 7; docs/model.md section 5): limits, closed forms, ledger, errors.
 
 ``voltage_model = 1`` drives the patch circuit ``C_p V' + V / R = chi delta'`` one way from the
 barrier in contact; ``voltage_model = 2`` adds ``chi V`` to the contact force. The references
@@ -18,7 +18,7 @@ from scipy.linalg import expm
 from scipy.optimize import brentq
 
 from piezo_fmu import Parameters, Simulator, derive_barrier
-from piezo_fmu.parameters import MAX_COUPLED_STIFFNESS
+from piezo_fmu.model.parameters import MAX_COUPLED_STIFFNESS
 from test_core import harmonic_run
 from test_properties import DURATION, base_inputs, chops, dampers, hold_times, run
 
@@ -26,7 +26,7 @@ NOMINAL_R = 52e3
 
 
 def coupling(params):
-    """``C_p`` (F) and ``chi`` (N/V) from MODEL.md section 5, written out here independently."""
+    """``C_p`` (F) and ``chi`` (N/V) from docs/model.md section 5, written out here independently."""
     b = derive_barrier(params)
     C_p = params.eps33 * params.W_p * params.L_p / params.t_p
     x1, x2, L = params.x1, params.x1 + params.L_p, params.L
@@ -49,7 +49,7 @@ def test_coupling_constants_and_the_electrode_gap_relation():
     C_p, chi = coupling(params)
     assert b.C_p == pytest.approx(C_p, rel=1e-14)
     assert b.chi == pytest.approx(chi, rel=1e-10)
-    # MODEL.md decision (the electrode gap): chi / C_p = k_V (t_p / L_p) |d31| / (eps33 g31), 0.402 k_V.
+    # docs/model.md, decision (the electrode gap): chi / C_p = k_V (t_p / L_p) |d31| / (eps33 g31), 0.402 k_V.
     relation = b.k_V * (params.t_p / params.L_p) * abs(params.d31) / (params.eps33 * params.g31)
     assert b.chi / b.C_p == pytest.approx(relation, rel=1e-12)
     assert b.chi / b.C_p / b.k_V == pytest.approx(0.402, abs=5e-4)
@@ -95,7 +95,7 @@ def test_small_load_voltage_follows_the_deflection_rate(R):
 # ------------------------------------------------------------------------ one contact, closed form
 
 def augmented_matrix(params, coupled):
-    """Contact with the right barrier on (u, w, u', w', 1, V), written out from MODEL.md sections 3, 5."""
+    """Contact with the right barrier on (u, w, u', w', 1, V), written out from docs/model.md sections 3, 5."""
     b = derive_barrier(params)
     C_p, chi = coupling(params)
     M1, m1 = params.M - b.M_eq, params.m + b.M_eq

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from piezo_fmu import EXPLICIT, Parameters, Simulator, derive_barrier
-from piezo_fmu.propagation import LinearPhase
+from piezo_fmu.solver.propagation import LinearPhase
 from scipy.linalg import expm
 
 
@@ -74,31 +74,35 @@ def test_phase_flow_is_the_matrix_exponential():
                                      (1.0, 1e6, 0.0), (1.0, 1e3, 1e5)])
 def test_free_flight_spectral_radius_in_closed_form_equals_the_eigenvalues(M, K, C):
     # Under-, critically and overdamped, and a free mass: the bracket length of free flight.
-    from piezo_fmu.simulator import _free_matrix, _free_spectral_radius
+    from piezo_fmu.model.dynamics import free_matrix, free_spectral_radius
 
-    eigen = np.max(np.abs(np.linalg.eigvals(_free_matrix(M, K, C))))
-    assert _free_spectral_radius(M, K, C) == pytest.approx(eigen, rel=1e-12)
+    eigen = np.max(np.abs(np.linalg.eigvals(free_matrix(M, K, C))))
+    assert free_spectral_radius(M, K, C) == pytest.approx(eigen, rel=1e-12)
 
 
 @pytest.mark.parametrize("model", [0, 2])
 def test_left_barrier_is_the_right_one_mirrored_exactly(model):
     # The left barrier's phase and bracket maps are made from the right one's by sign changes:
     # they must equal, bit for bit, what a direct construction gives.
-    from piezo_fmu.simulator import LEFT, _BracketMaps, _contact_matrix, _event_functionals, _ledger_rates
+    from piezo_fmu.model.dynamics import LEFT, contact_matrix, event_functionals
+    from piezo_fmu.model.energy import energy_rates
+    from piezo_fmu.solver.brackets import BracketMaps
 
     params = Parameters(voltage_model=model)
     sim = Simulator(params)
+    damper = sim.damper
     coupling = (sim.barrier.chi, sim.barrier.C_p, params.R_load) if model == 2 else None
-    A = _contact_matrix(sim._M_contact, sim._m_contact, params.K, params.C, sim.barrier.K_eq, params.C_eq, params.d,
-                        LEFT, coupling)
+    A = contact_matrix(damper.M_contact, damper.m_contact, params.K, params.C, sim.barrier.K_eq, params.C_eq, params.d,
+                       LEFT, coupling)
     direct = LinearPhase(A)
     mirrored = sim._contact[LEFT]
     assert np.array_equal(mirrored.A, A) and mirrored.h == direct.h
+    assert np.array_equal(damper.matrix(LEFT), A)
     assert np.array_equal(mirrored._terms, direct._terms)
     n = A.shape[0]
-    maps = _BracketMaps(direct, _event_functionals(LEFT, params.d, n), _ledger_rates(LEFT, params.K, params.C, n))
-    assert np.array_equal(sim._maps[LEFT].stacked, maps.stacked)
-    assert sim._maps[LEFT].noise_rows == maps.noise_rows
+    maps = BracketMaps(direct, event_functionals(LEFT, params.d, n), energy_rates(LEFT, params.K, params.C, n))
+    assert np.array_equal(sim._opener.maps[LEFT].stacked, maps.stacked)
+    assert sim._opener.maps[LEFT].noise_rows == maps.noise_rows
 
 
 def test_booked_ledger_equals_the_ledger_read_on_the_open_bracket():
@@ -112,7 +116,7 @@ def test_booked_ledger_equals_the_ledger_read_on_the_open_bracket():
         br = sim._bracket
         if br is None or br.s == 0.0:
             continue
-        read, booked = sim._open_ledger(br), sim._booked_ledger(br)
+        read, booked = sim._ledger.open_reading(br), sim._ledger.booked(br)
         for a, b in zip(read, booked):
             assert b == pytest.approx(a, rel=1e-12, abs=1e-16 * sim.energy.initial)
         assert read[0] > 0.0 and read[2] != 0.0
@@ -129,13 +133,13 @@ def test_booked_ledger_equals_the_ledger_read_on_the_open_bracket():
 ])
 def test_bracketed_root_finder_reaches_the_last_bits(f, lo, hi, root):
     # The core's own bracketed solver (the runtime needs numpy only, not scipy's brentq).
-    from piezo_fmu.roots import bracketed
+    from piezo_fmu.model.scalar import bracketed
 
     assert abs(bracketed(f, lo, hi) - root) <= 8 * np.spacing(root)
 
 
 def test_bracketed_root_finder_refuses_an_interval_without_a_sign_change():
-    from piezo_fmu.roots import bracketed
+    from piezo_fmu.model.scalar import bracketed
 
     with pytest.raises(ValueError, match="do not bracket a root"):
         bracketed(math.cos, 0.0, 1.0)

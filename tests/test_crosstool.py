@@ -12,6 +12,8 @@ What is proved here:
   and the fmpy loop both count time in whole nanoseconds (``t_k = (k * 10**6) / 1e9``); ecos adds
   the step to its time at every step, and fmpy replaying ecos's own ``(t_k, h)`` calls gives
   ecos's results bit for bit;
+- the FMI 3.0 FMU (``fmus/PiezoImpactDamper3.fmu``, co-simulation) in fmpy (``FMU3Slave``) and in
+  ecos gives the FMI 2.0 FMU's bits under the same master;
 - the files follow the FMI cross-check layout, the committed FMU passes its reference, and
   ``crosscheck/run_crosscheck.py`` passes for each importer;
 - the reference holds on another machine: under other BLAS kernels and without numpy's AVX-512
@@ -214,7 +216,15 @@ def test_fmpy_replaying_ecos_calls_is_bit_identical_to_ecos():
 
 # -- the cross-check script --------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("importer", ["fmpy", "libcosim", "ecos", "native"])
+@pytest.mark.parametrize("importer", ["fmpy-fmi3", "ecos-fmi3", "native-fmi3"])
+def test_the_fmi3_fmu_in_fmpy_ecos_and_the_c_host_gives_the_fmi2_fmus_bits(importer):
+    fmi2, fmi3 = run(importer.removesuffix("-fmi3")), importers.run(importer)
+    assert list(fmi3.outputs) == outputs_of_fmu() and fmi3.steps == fmi2.steps
+    comparison = scenario.compare(fmi3.time, fmi3.outputs, fmi2.time, fmi2.outputs)
+    assert comparison.all_bit_identical, comparison.report()
+
+
+@pytest.mark.parametrize("importer", ["fmpy", "libcosim", "ecos", "native", "fmpy-fmi3", "ecos-fmi3", "native-fmi3"])
 def test_crosscheck_script_passes(importer):
     completed = subprocess.run([sys.executable, str(REPO / "crosscheck" / "run_crosscheck.py"), importer],
                                capture_output=True, text=True, timeout=300, cwd=REPO)

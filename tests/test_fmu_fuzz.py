@@ -54,7 +54,8 @@ from fmpy.logging import addLoggerProxy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from piezo_fmu import EXPLICIT, Parameters, derive_barrier, fmu_build, parameter_info
+from piezo_fmu import EXPLICIT, Parameters, derive_barrier, parameter_info
+from piezo_fmu.fmi import archive
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
@@ -544,8 +545,8 @@ def test_the_fmu_binary_does_not_touch_freed_memory_at_process_exit(unzipdir):
     pointer; Dask workers that ran the FMU aborted at exit with "free(): corrupted unsorted
     chunks" (6 of 6 sweeps). The build now drops that entry from ``.fini_array`` (the static's
     destructor already does the work): valgrind is clean and no Dask sweep aborts (0 of 6)."""
-    binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.so").read_bytes()
-    called, unload, _ = fmu_build.exit_functions(binary)
+    binary = (Path(unzipdir) / "binaries" / "linux64" / "PiezoImpactDamper.pythonfmu.so").read_bytes()
+    called, unload, _ = archive.exit_functions(binary)
     assert unload is None or unload not in called, (
         f"onLibraryUnload (0x{unload:x}) is in the exit functions {[hex(a) for a in called]}")
 

@@ -1,10 +1,12 @@
 """A native (C) host, and a host model that plugs the damper into a primary structure.
 
-1. ``hosts/native_host.c`` is built here with the system C compiler against the FMI 2.0
-   headers and loads ``binaries/linux64/PiezoImpactDamper.so`` from the extracted FMU. Without
-   libpython in the process the binary cannot be loaded (proved); under the launcher
-   ``hosts/run_native_host.sh`` the nominal case (MODEL.md section 7, 2 s at a 1 ms step) runs
-   cleanly, exits with status 0 and nothing on stderr, and its results equal fmpy's bit for bit.
+1. ``hosts/native_host.c`` is built here with the system C compiler against the FMI headers
+   and loads ``binaries/linux64/PiezoImpactDamper.so`` from the extracted FMU: the project's
+   loader, which finds a Python itself. pythonfmu's own binary cannot be loaded by such a host
+   (proved); the FMU can: in a bare environment (only ``PATH``, no ``LD_PRELOAD``,
+   ``PYTHONHOME`` or ``PYTHONPATH``) the nominal case (docs/model.md section 7, 2 s at a 1 ms step)
+   runs cleanly, exits with status 0 and nothing on stderr, and its results equal fmpy's bit
+   for bit. ``tests/test_loader.py`` tests the loader itself.
 2. ``hosts/system/OspSystemStructure.xml`` couples ``PrimaryStructure.fmu`` (an SDOF floor on a
    synthetic ground-motion record, built here from ``hosts/primary_structure.py``) with the
    damper both ways, in OSP libcosim; the SSP version runs in ecos and gives the same result.
@@ -45,15 +47,17 @@ def test_c_host_builds_with_the_system_compiler(host):
     assert (native.fmi_headers() / "fmi2FunctionTypes.h").is_file()
 
 
-def test_c_host_cannot_load_the_fmu_without_libpython(host, tmp_path):
-    """The reason for the launcher: the pythonfmu binary does not link libpython."""
+def test_c_host_cannot_load_pythonfmus_own_binary(host, tmp_path):
+    """The reason for the loader: pythonfmu's binary calls the Python C API but links no
+    libpython, so a native host cannot load it."""
     import zipfile
 
     with zipfile.ZipFile(FMU) as archive:
         archive.extractall(tmp_path / "fmu")
-    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH")}
+    binaries = tmp_path / "fmu" / "binaries" / "linux64"
+    (binaries / "PiezoImpactDamper.pythonfmu.so").replace(binaries / "PiezoImpactDamper.so")
     completed = subprocess.run([str(host), str(tmp_path / "fmu"), str(tmp_path / "out.csv"), "--stop", "0.01"],
-                               capture_output=True, text=True, env=env, timeout=60)
+                               capture_output=True, text=True, env=native.environment(), timeout=60)
     assert completed.returncode == 1
     assert "dlopen failed" in completed.stderr and "undefined symbol" in completed.stderr
 
@@ -64,10 +68,12 @@ def fmpy_nominal() -> importers.Result:
                               start_values={})
 
 
-def test_c_host_runs_the_nominal_case_cleanly_and_equals_fmpy(host, tmp_path):
+def test_c_host_runs_the_nominal_case_cleanly_in_a_bare_environment_and_equals_fmpy(host, tmp_path):
+    env = native.environment()
+    assert not {"LD_PRELOAD", "PYTHONHOME", "PYTHONPATH", "PIEZO_FMU_PYTHON"} & set(env)
     out = tmp_path / "nominal.csv"
     completed = native.run(FMU, out, ["--stop", repr(NOMINAL_STOP), "--step", repr(NOMINAL_STEP)],
-                           executable=host)
+                           executable=host, env=env)
     assert completed.returncode == 0  # a clean exit: no crash in the interpreter's teardown
     assert completed.stderr == "" and completed.stdout == ""
     time, outputs = scenario.read_csv(out)
@@ -76,6 +82,17 @@ def test_c_host_runs_the_nominal_case_cleanly_and_equals_fmpy(host, tmp_path):
     comparison = scenario.compare(time, outputs, reference.time, reference.outputs, rel_tol=0.0)
     assert comparison.all_bit_identical, comparison.report()
     assert outputs["impact_count"][-1] > 0 and outputs["main_displacement"][0] == 0.01
+
+
+def test_c_host_runs_the_fmi3_fmu_in_a_bare_environment_and_equals_fmpy(host, tmp_path):
+    """The FMI 3.0 FMU, through its own loader, gives the FMI 2.0 FMU's bits in fmpy."""
+    out = tmp_path / "nominal3.csv"
+    native.run(FMU.with_name("PiezoImpactDamper3.fmu"), out,
+               ["--stop", repr(NOMINAL_STOP), "--step", repr(NOMINAL_STEP)], executable=host)
+    time, outputs = scenario.read_csv(out)
+    reference = fmpy_nominal()
+    comparison = scenario.compare(time, outputs, reference.time, reference.outputs, rel_tol=0.0)
+    assert comparison.all_bit_identical, comparison.report()
 
 
 def test_c_host_runs_the_cross_check_scenario(host, tmp_path):
@@ -93,12 +110,15 @@ def test_c_host_runs_the_cross_check_scenario(host, tmp_path):
     assert comparison.all_bit_identical, comparison.report()
 
 
-def test_c_host_reports_fmu_errors_with_status_1(host, tmp_path):
-    """A rejected step (here: q0 outside the gap) is an FMU error, not a crash."""
+@pytest.mark.parametrize("start_value, words", [("p0=0", "q0 = 0.01 m starts the impact mass outside the gap"),
+                                                ("m=-1", "m = -1.0 kg is out of range")])
+def test_c_host_reports_fmu_errors_with_status_1(host, tmp_path, start_value, words):
+    """Invalid start values (q0 outside the gap, a negative mass) are an FMU error, not a crash,
+    and never NaN output with exit status 0: the host treats any status but OK as an error."""
     with pytest.raises(subprocess.CalledProcessError) as failure:
-        native.run(FMU, tmp_path / "bad.csv", ["--stop", "0.01", "--set", "p0=0"], executable=host)
-    assert failure.value.returncode == 1 and "fmi2DoStep failed" in failure.value.stderr
-    assert "invalid start values" in failure.value.stderr  # the FMU's own message, via the logger
+        native.run(FMU, tmp_path / "bad.csv", ["--stop", "0.01", "--set", start_value], executable=host)
+    assert failure.value.returncode == 1 and "fmi2DoStep returned Discard" in failure.value.stderr
+    assert f"invalid start values: {words}" in failure.value.stderr  # the FMU's own message
 
 
 # -- the host model ------------------------------------------------------------------------------------

@@ -5,10 +5,10 @@ Two groups of tests:
 1. The reference on its own, against closed forms and conservation laws, so that a
    disagreement with the core can be blamed on the right side: free damped oscillation
    (huge gap), harmonic and first-order-hold base excitation (huge gap), one isolated contact
-   on either barrier (the Kelvin-Voigt half-sine of MODEL.md section 3), a shallow contact,
+   on either barrier (the Kelvin-Voigt half-sine of docs/model.md section 3), a shallow contact,
    momentum at every switch, and energy bookkeeping without damping.
 2. The core (``piezo_fmu.Simulator``) against the reference over 2 s for the nominal case,
-   the two designs of MODEL.md section 7 and one harmonic base excitation: impact count equal,
+   the two designs of docs/model.md section 7 and one harmonic base excitation: impact count equal,
    impact times within 1e-8 s, V_i within 1e-6 relative, DI within 1e-6 relative (the issue's
    tolerances; they are never loosened here).
 
@@ -41,7 +41,7 @@ from reference import FREE, FirstOrderHold, ReferenceSimulator, harmonic, refere
 
 from piezo_fmu import Parameters, derive_barrier  # noqa: E402
 
-T_END = 2.0  # s, the convention of MODEL.md section 7
+T_END = 2.0  # s, the convention of docs/model.md section 7
 
 # The tolerances.
 TIME_TOL = 1e-8  # s

@@ -49,7 +49,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from piezo_fmu import EXPLICIT, Parameters, Simulator, derive_barrier, parameter_info
-from piezo_fmu.propagation import THETA
+from piezo_fmu.solver.propagation import THETA
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))

@@ -1,4 +1,4 @@
-"""The patch voltage as a circuit (MODEL.md section 5, eqs. 20-21): exact on every bracket.
+"""The patch voltage as a circuit (docs/model.md section 5, eqs. 20-21): exact on every bracket.
 
 The patch is a capacitance ``C_p`` across the load ``R``, driven by the barrier's deflection rate:
 ``C_p V' + V / R = chi delta'``. Its electrical rate ``1 / (R C_p)`` (5.6e4 1/s at the nominal
@@ -6,7 +6,8 @@ load, up to 1e9 1/s for small loads) is far above the mechanical ones, so ``V`` 
 the Taylor-exact brackets of ``propagation.py`` whenever it can be:
 
 - between contacts a barrier's voltage decays as ``V0 exp(-t / (R C_p))``, in closed form, and
-  its harvested energy is ``0.5 C_p V0^2 (1 - exp(-2 t / (R C_p)))`` (:func:`decay`);
+  its harvested energy is ``0.5 C_p V0^2 (1 - exp(-2 t / (R C_p)))``
+  (:func:`piezo_fmu.model.voltage.decay`);
 - in contact under the one-way model (``voltage_model = 1``) the mechanics are untouched and ``V``
   is the exact solution of a scalar linear ODE driven by the bracket polynomial ``delta'(s)``.
   In normalised time ``s`` (``t = t0 + s tau``): ``dV/ds = -lam V + k D(s)``, ``lam = tau/(R C_p)``,
@@ -40,20 +41,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from .propagation import ORDER, PRIMITIVE_TERMS, STATE_TERMS, THETA, primitive_of_square
-from .roots import bracketed, crossings
+
+from ..model.dynamics import DU, DW, VOLT
+from ..model.scalar import bracketed
+from ..model.voltage import decay
+from .propagation import ORDER, PRIMITIVE_TERMS, STATE_TERMS, THETA, powers, primitive_of_square
+from .roots import crossings
 
 #: ``lam = tau / (R C_p)`` above which the closed form is used (below it, the Taylor series).
 LAM_SPLIT = THETA
 _K = np.arange(STATE_TERMS, dtype=float)
 _NOISE = 64 * float(np.finfo(float).eps)
-
-
-def decay(V0: float, dt: float, RC: float, C_p: float) -> tuple[float, float]:
-    """Voltage (V) after ``dt`` s of free decay from ``V0``, and the energy (J) harvested meanwhile."""
-    if dt == 0.0 or V0 == 0.0:
-        return V0, 0.0
-    return V0 * math.exp(-dt / RC), -0.5 * C_p * V0 * V0 * math.expm1(-2.0 * dt / RC)
 
 
 def primitive_of_product(a: np.ndarray, b: np.ndarray, weight: float = 1.0) -> np.ndarray:
@@ -180,3 +178,96 @@ def driven(V0: float, D: np.ndarray, lam: float, k: float, tau: float, R: float,
         carry = (k * D[i] - (i + 1) * carry) / lam
         P[i] = carry
     return Piece(P, V0 - float(P[0]), lam, D, tau, R, chi)
+
+
+class CircuitState:
+    """The two patch circuits of a run (``voltage_model`` 1 and 2), exact event by event.
+
+    Per barrier (index ``(side + 1) // 2``: left 0, right 1) it keeps the voltage ``V`` (V) booked
+    at time ``t`` (s) and the energy harvested up to then (J); and the energy converted by the
+    barriers so far (J), the peak ``|V|`` of the open contact (V), and the voltage of the barrier
+    in contact on the open bracket (a :class:`Piece`, with its side).
+
+    Parameters
+    ----------
+    chi : N/V, coupling; C_p : F, patch capacitance; R : Ohm, load.
+    coupled : True under ``voltage_model = 2`` (``V`` is a column of the contact state).
+    t0 : s, start time.
+    """
+
+    def __init__(self, chi: float, C_p: float, R: float, coupled: bool, t0: float):
+        self.chi, self.C_p, self.R, self.coupled = chi, C_p, R, coupled
+        self.RC = R * C_p
+        self.V = [0.0, 0.0]
+        self.t = [float(t0), float(t0)]
+        self.harvested = [0.0, 0.0]
+        self.converted = 0.0
+        self.peak = 0.0
+        self.piece: Piece | None = None
+        self.piece_side = 0
+
+    def open(self, c: np.ndarray, tau: float, side: int) -> Piece:
+        """The voltage of the barrier on ``side`` over a contact bracket whose state has the Taylor
+        coefficients ``c`` and which lasts ``tau`` s; it becomes the open piece."""
+        D = side * (c[:, DW] - c[:, DU])  # delta' (m/s)
+        if self.coupled:
+            piece = Piece(c[:, VOLT].copy(), 0.0, tau / self.RC, D, tau, self.R, self.chi)
+        else:
+            piece = driven(self.V[(side + 1) // 2], D, tau / self.RC, tau * self.chi / self.C_p, tau, self.R, self.chi)
+        self.piece, self.piece_side = piece, side
+        return piece
+
+    def close(self, s: float, pw: np.ndarray, t: float) -> None:
+        """Book the voltage of the barrier in contact where the state stands: at ``s`` on the open
+        bracket (``pw``: its powers), time ``t`` (s)."""
+        piece = self.piece
+        if piece is None:
+            return
+        i = (self.piece_side + 1) // 2
+        v = piece.value(s, pw)
+        self.V[i], self.t[i] = v, t
+        self.harvested[i] += piece.harvested(s, pw)
+        self.converted += piece.converted(s, pw)
+        self.peak = max(self.peak, abs(v))
+        self.piece = None
+
+    def contact(self, side: int, t: float) -> None:
+        """A contact with the barrier on ``side`` starts at ``t`` (s) from the voltage its circuit
+        decayed to since it was booked."""
+        i = (side + 1) // 2
+        v, harvested = decay(self.V[i], t - self.t[i], self.RC, self.C_p)
+        self.V[i], self.t[i] = v, t
+        self.harvested[i] += harvested
+        self.peak = abs(v)
+
+    def peak_at(self, s: float) -> None:
+        """A zero of ``V'`` at ``s`` on the open bracket: a candidate for the impact voltage."""
+        self.peak = max(self.peak, abs(self.piece.value(s, powers(s))))
+
+    def now(self, side: int, s: float, pw: np.ndarray, t: float) -> tuple[float, float]:
+        """Voltage (V) of the barrier on ``side`` at time ``t`` (s), at ``s`` on the open bracket
+        (``pw``: its powers), and its energy harvested so far (J)."""
+        i = (side + 1) // 2
+        if self.piece is not None and side == self.piece_side:
+            return self.piece.value(s, pw), self.harvested[i] + self.piece.harvested(s, pw)
+        v, harvested = decay(self.V[i], t - self.t[i], self.RC, self.C_p)
+        return v, self.harvested[i] + harvested
+
+    def converted_now(self, s: float, pw: np.ndarray) -> float:
+        """The energy converted so far (J), the open bracket up to ``s`` included."""
+        if self.piece is None:
+            return self.converted
+        return self.converted + self.piece.converted(s, pw)
+
+    def to_dict(self) -> dict:
+        """The booked state, JSON-safe (the open piece is rebuilt from the bracket)."""
+        return {"V": list(self.V), "t": list(self.t), "harvested": list(self.harvested),
+                "converted": self.converted, "peak": self.peak}
+
+    def restore(self, data: dict) -> None:
+        """Set the booked state saved by :meth:`to_dict`."""
+        self.V = [float(v) for v in data["V"]]
+        self.t = [float(t) for t in data["t"]]
+        self.harvested = [float(h) for h in data["harvested"]]
+        self.converted = float(data["converted"])
+        self.peak = float(data["peak"])

@@ -1,7 +1,7 @@
 """Exact propagation of a linear phase ``x' = A x`` over short brackets.
 
 Both phases of the damper are linear with constant coefficients once the base input is a
-first-order hold (MODEL.md sections 2-3). In deviation coordinates from the moving base,
+first-order hold (docs/model.md sections 2-3). In deviation coordinates from the moving base,
 ``u = p - y(t)`` and ``w = q - y(t)``, the ramp of the hold is the exact particular solution,
 so the state ``x = (u, w, u', w', 1)`` obeys ``x' = A x`` (the constant 1 carries the contact
 offset ``d/2``). Its solution is ``x(t0 + s tau) = exp(A s tau) x(t0)``.
@@ -35,7 +35,8 @@ _K = np.arange(ORDER + 1)
 STATE_TERMS = ORDER + 1
 #: Coefficients of the primitive of a squared bracket polynomial (degree 2 ORDER + 1).
 PRIMITIVE_TERMS = 2 * ORDER + 2
-_LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
+#: The exponents ``k`` of :func:`powers`.
+POWER_EXPONENTS = _LONG = np.arange(PRIMITIVE_TERMS, dtype=float)
 #: The series is built by doubling (``LinearPhase``) up to the first power of 2 above ORDER.
 _DOUBLED = 1 << ORDER.bit_length()
 #: ``1 / C(m + j, m)`` for j < m, m a power of 2.

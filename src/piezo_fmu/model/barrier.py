@@ -1,8 +1,8 @@
-"""The barrier: a clamped-free steel beam with one piezoelectric patch (MODEL.md section 4-5).
+"""The barrier: a clamped-free steel beam with one piezoelectric patch (docs/model.md section 4-5).
 
 Derives the tip-referred equivalents ``M_eq`` and ``K_eq`` (eqs. 22-23) from the first
 cantilever mode, the quasi-static voltage gain ``k_V`` (eqs. 25-27, with the patch-average
-curvature of MODEL.md section 5), and the patch as a circuit element: its capacitance ``C_p`` and
+curvature of docs/model.md section 5), and the patch as a circuit element: its capacitance ``C_p`` and
 electromechanical coupling ``chi`` (eqs. 20-21).
 """
 
@@ -13,10 +13,18 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from .parameters import EXPLICIT, Parameters
-from .roots import bracketed
 
-#: Normalisation of the first mode, chosen so that phi_1(L) = 1 (MODEL.md section 4).
+from .scalar import bracketed
+
+#: ``barrier_mode`` values: derive ``M_eq``/``K_eq`` from the beam geometry, or take them as given.
+DERIVED = 0
+EXPLICIT = 1
+#: The equivalent mass and stiffness printed in the paper (kg, N/m); see the README's departures
+#: from the paper: they cannot be derived from Table 1.
+PRINTED_M_EQ = 0.0292
+PRINTED_K_EQ = 46.7753e6
+
+#: Normalisation of the first mode, chosen so that phi_1(L) = 1 (docs/model.md section 4).
 C1 = 0.5
 
 
@@ -114,8 +122,9 @@ class Barrier:
     chi: float = 0.0
 
 
-def derive_barrier(params: Parameters) -> Barrier:
-    """Barrier equivalents of ``params``.
+def derive_barrier(params) -> Barrier:
+    """Barrier equivalents of ``params`` (a :class:`~piezo_fmu.model.parameters.Parameters`, or any
+    object with its beam, patch and barrier-mode attributes).
 
     With ``barrier_mode = 0`` (default) ``M_eq`` and ``K_eq`` follow from the geometry by
     eqs. 22-23; with ``barrier_mode = 1`` the given ``params.M_eq`` and ``params.K_eq`` pass
@@ -128,7 +137,7 @@ def derive_barrier(params: Parameters) -> Barrier:
     phi2_patch = integral_phi_squared(params.x1, x2, L)
 
     EI_b = params.E_b * params.W_b * params.t_b**3 / 12.0
-    # MODEL.md decision (neutral axis): the true offset, half of the printed eq. 15.
+    # docs/model.md, decision (neutral axis): the true offset, half of the printed eq. 15.
     z_n = params.E_p * params.t_p * (params.t_b + params.t_p) / (2.0 * (params.E_b * params.t_b + params.E_p * params.t_p))
     EI_p = params.E_p * params.W_p * params.t_p / 12.0 * (params.t_p**2 + 3.0 * (params.t_p + params.t_b - 2.0 * z_n) ** 2)
 
@@ -138,13 +147,13 @@ def derive_barrier(params: Parameters) -> Barrier:
         M_eq = params.rho_b * params.t_b * params.W_b * eta1 + params.rho_p * params.t_p * params.W_p * phi2_patch
         K_eq = EI_b * eta1 * beta1**4 + EI_p * beta1**4 * phi2_patch
 
-    # MODEL.md decision (where the strain is read): patch-average curvature per unit tip deflection.
+    # docs/model.md, decision (where the strain is read): patch-average curvature per unit tip deflection.
     phi_L = float(mode_shape(L, L))
     slope_change = float(mode_slope(x2, L) - mode_slope(params.x1, L))
     kappa_bar = slope_change / (params.L_p * phi_L)
     y_p = (params.t_b + params.t_p) / 2.0 - z_n
     k_V = params.g31 * params.E_p * params.L_p * y_p * abs(kappa_bar)
-    # The circuit (eqs. 20-21; MODEL.md section 5, decision "the electrode gap"): magnitudes, so
+    # The circuit (eqs. 20-21; docs/model.md section 5, decision "the electrode gap"): magnitudes, so
     # that the voltage of the barrier in contact is positive while its deflection grows.
     C_p = params.eps33 * params.W_p * params.L_p / params.t_p
     e31 = abs(params.d31) * params.E_p

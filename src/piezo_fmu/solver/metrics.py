@@ -1,4 +1,4 @@
-"""Running metrics of a run (MODEL.md section 6) and perfectibility over a sweep (eq. 31)."""
+"""Running metrics of a run (docs/model.md section 6) and perfectibility over a sweep (eq. 31)."""
 
 from __future__ import annotations
 

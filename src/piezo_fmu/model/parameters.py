@@ -1,6 +1,6 @@
 """Parameters of the piezo-impact damper, in SI units, under the paper's symbols.
 
-The defaults are the nominal case of MODEL.md section 7 (Table 1 of Afsharfard and
+The defaults are the nominal case of docs/model.md section 7 (Table 1 of Afsharfard and
 Farshidianfar, 2014, with ``p(0) = q(0) = 10 mm`` and ``R_L = 52 kOhm``).
 """
 
@@ -10,25 +10,13 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-#: ``barrier_mode`` values: derive ``M_eq``/``K_eq`` from the beam geometry, or take them as given.
-DERIVED = 0
-EXPLICIT = 1
-
-#: ``voltage_model`` values (MODEL.md section 5): the paper's quasi-static voltage ``V = k_V delta``;
-#: the patch capacitance and load as a circuit driven one way by the barrier (eqs. 20-21);
-#: the same circuit with ``chi V`` acting back on the barrier in contact.
-QUASI_STATIC = 0
-CIRCUIT = 1
-COUPLED = 2
+from .barrier import DERIVED, EXPLICIT, PRINTED_K_EQ, PRINTED_M_EQ, derive_barrier
+from .voltage import CIRCUIT, COUPLED, QUASI_STATIC
 
 #: Under ``voltage_model = 2`` the electrical rate ``1 / (R_load C_p)`` may exceed the fastest
 #: mechanical rate of a contact by at most this factor: the coupled contact is integrated with
 #: brackets of ``THETA R_load C_p`` (``propagation.py``), so a contact costs about this many of them.
 MAX_COUPLED_STIFFNESS = 1e4
-
-#: The equivalent mass and stiffness printed in the paper (kg, N/m); see MODEL.md section 4.
-PRINTED_M_EQ = 0.0292
-PRINTED_K_EQ = 46.7753e6
 
 
 @dataclass(frozen=True)
@@ -63,7 +51,7 @@ def _p(default: float, unit: str, description: str, bound: Bound = POSITIVE):
 @dataclass(frozen=True)
 class Parameters:
     """Every Table 1 quantity, the load, the initial conditions, the barrier mode, and the
-    patch's circuit constants with the voltage model (MODEL.md section 5).
+    patch's circuit constants with the voltage model (docs/model.md section 5).
 
     All values are SI. Construction validates every value and raises ``ValueError``
     naming the parameter, the value and the allowed range.
@@ -105,7 +93,7 @@ class Parameters:
     )
     M_eq: float = _p(PRINTED_M_EQ, "kg", "Equivalent tip mass of a barrier (explicit mode only)")
     K_eq: float = _p(PRINTED_K_EQ, "N/m", "Equivalent tip stiffness of a barrier (explicit mode only)")
-    # The patch as a circuit element (MODEL.md section 5, eqs. 20-21; voltage_model 1 and 2).
+    # The patch as a circuit element (docs/model.md section 5, eqs. 20-21; voltage_model 1 and 2).
     d31: float = _p(-274e-12, "m/V", "Piezoelectric strain constant d31 of the patch (its magnitude is used)", FINITE)
     eps33: float = _p(25.55e-9, "F/m", "Permittivity eps33 of the patch at constant strain")
     voltage_model: int = field(
@@ -149,9 +137,7 @@ class Parameters:
             raise ValueError(
                 f"q0 = {self.q0!r} m starts the impact mass outside the gap: |q0 - p0| must be <= d/2, "
                 f"so the allowed range of q0 is [{self.p0 - self.d / 2:g}, {self.p0 + self.d / 2:g}] m")
-        # M_eq is part of M (MODEL.md section 3), so M must exceed it; checked here for both modes.
-        from .barrier import derive_barrier  # local import: barrier depends on this module
-
+        # M_eq is part of M (docs/model.md section 3), so M must exceed it; checked here for both modes.
         barrier = derive_barrier(self)
         m_eq = barrier.M_eq
         if self.M <= m_eq:

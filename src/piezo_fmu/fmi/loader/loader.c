@@ -1,0 +1,743 @@
+/*
+ * The binary of every FMU piezo-fmu builds (FMI 2.0 binaries/linux64, FMI 3.0
+ * binaries/x86_64-linux), in front of pythonfmu's binary, which the FMU keeps beside it as
+ * <modelIdentifier>.pythonfmu.so. Compiled once per FMI version: -DFMI_VERSION=2 or 3, with the
+ * forwarders that generate.py writes from the standard's headers (FORWARDERS names that file).
+ *
+ * What it adds to pythonfmu's binary:
+ *
+ * 1. Python. pythonfmu's binary calls the Python C API but links no libpython, so it loads only
+ *    into a process that has Python already. At the first instantiation the loader looks:
+ *    - if the process has Python (Py_IsInitialized is found, as in fmpy, libcosimpy, ecospy),
+ *      it changes nothing;
+ *    - otherwise it takes $PIEZO_FMU_PYTHON (the path of an interpreter), or else python3 on
+ *      PATH, runs it once (bounded by $PIEZO_FMU_PYTHON_TIMEOUT seconds, default 30) to learn
+ *      its shared libpython, sys.base_prefix and site-packages and that it imports numpy, loads
+ *      that libpython with RTLD_GLOBAL, sets PYTHONHOME if unset and adds the site-packages to
+ *      the end of PYTHONPATH (a user's entries keep precedence, and a virtual environment's
+ *      packages are found).
+ *    When none is usable, instantiation returns NULL after a message through the host's logger
+ *    that says what was tried and what to set. Nothing goes to stdout or stderr.
+ * 2. Statuses. pythonfmu's binary turns any exception of the slave into Fatal. The slave raises
+ *    PiezoFmuRefusal for a call it refuses; the loader gives pythonfmu its own logger, and when a
+ *    call returns Fatal with that exception's message logged during the call, the call returns
+ *    Error instead and the host's logger gets the refusal's own text with status Error. Every
+ *    other Fatal stays Fatal.
+ * 3. Logging. pythonfmu 0.7.0 sends nothing to the logger, its Fatal messages included, unless
+ *    debug logging is on (and pythonfmu3 filters Fatal messages by category). pythonfmu always
+ *    runs with debug logging on; the loader passes on every message of status Warning or worse,
+ *    and those of status OK when the host has turned debug logging on for their category.
+ *
+ * The instance the host holds is the loader's own (struct Instance) wrapping pythonfmu's; all
+ * per-instance state is in it, so instances may live in different threads. What is process-wide
+ * (the interpreter, pythonfmu's binary and its function table) is set up once (pthread_once)
+ * and not changed afterwards. An FMI 2.0 and an FMI 3.0 FMU in one process share one
+ * interpreter: the second loader finds the first one's libpython in the process.
+ */
+
+#define _GNU_SOURCE /* dladdr, RTLD_DEFAULT */
+
+#include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#if FMI_VERSION == 2
+#include "fmi2Functions.h"
+typedef fmi2Status Status;
+#define STATUS_OK fmi2OK
+#define STATUS_ERROR fmi2Error
+#define STATUS_FATAL fmi2Fatal
+#elif FMI_VERSION == 3
+#include "fmi3Functions.h"
+typedef fmi3Status Status;
+#define STATUS_OK fmi3OK
+#define STATUS_ERROR fmi3Error
+#define STATUS_FATAL fmi3Fatal
+#else
+#error "compile with -DFMI_VERSION=2 or -DFMI_VERSION=3"
+#endif
+
+extern char **environ;
+
+/* The repr of the project's refusal exception, as pythonfmu logs it. */
+#define REFUSAL "PiezoFmuRefusal("
+/* pythonfmu's binary, beside this one: <modelIdentifier>.so -> <modelIdentifier>.pythonfmu.so */
+#define REAL_SUFFIX ".pythonfmu.so"
+#define DEFAULT_TIMEOUT_S 30.0
+#define MAX_QUERY_OUTPUT 65536
+#define PROBLEM_SIZE 4096
+
+typedef struct {
+    void *real; /* pythonfmu's instance */
+#if FMI_VERSION == 2
+    fmi2CallbackFunctions host;  /* the host's callbacks */
+    fmi2CallbackFunctions relay; /* what pythonfmu gets: the loader's logger, this instance */
+    char *name;
+#else
+    fmi3InstanceEnvironment host_environment;
+    fmi3LogMessageCallback host_log;
+#endif
+    int debug_logging;
+    size_t ncategories;
+    char **categories;
+    char *refusal; /* the refusal message pythonfmu logged during the current call */
+} Instance;
+
+static Status finish(Instance *in, Status status);
+static Status unsupported(Instance *in, const char *function);
+
+#include FORWARDERS
+
+static pthread_once_t load_once = PTHREAD_ONCE_INIT;
+static char problem[PROBLEM_SIZE]; /* why pythonfmu's binary could not be loaded; empty if it was */
+
+/* -- messages to the host ---------------------------------------------------------------------- */
+
+static void to_host(Instance *in, Status status, const char *category, const char *text)
+{
+#if FMI_VERSION == 2
+    if (!in->host.logger) return;
+    /* The FMI 2.0 message is a printf format: a '%' of the text is written "%%". */
+    size_t percents = 0;
+    for (const char *p = text; *p; p++) percents += *p == '%';
+    char *escaped = percents ? malloc(strlen(text) + percents + 1) : NULL;
+    if (escaped) {
+        char *o = escaped;
+        for (const char *p = text; *p; p++) {
+            *o++ = *p;
+            if (*p == '%') *o++ = '%';
+        }
+        *o = '\0';
+    }
+    in->host.logger(in->host.componentEnvironment, in->name, status, category,
+                    escaped ? escaped : percents ? "(out of memory)" : text);
+    free(escaped);
+#else
+    if (in->host_log) in->host_log(in->host_environment, status, category, text);
+#endif
+}
+
+static int category_enabled(const Instance *in, const char *category)
+{
+    if (in->ncategories == 0) return 1;
+    for (size_t i = 0; i < in->ncategories; i++)
+        if (strcmp(in->categories[i], category) == 0) return 1;
+    return 0;
+}
+
+/* A message of pythonfmu's binary: a refusal is kept for finish(); the rest goes to the host. */
+static void relay_message(Instance *in, Status status, const char *category, const char *message)
+{
+    if (!in || !message) return;
+    category = category ? category : "";
+    if (status == STATUS_FATAL && strstr(message, REFUSAL)) {
+        char *copy = strdup(message);
+        if (copy) {
+            free(in->refusal);
+            in->refusal = copy;
+            return;
+        }
+    }
+    if (status != STATUS_OK || (in->debug_logging && category_enabled(in, category)))
+        to_host(in, status, category, message);
+}
+
+#if FMI_VERSION == 2
+/* pythonfmu passes the text itself as the format, with no arguments: it is used as it is. */
+static void relay(fmi2ComponentEnvironment environment, fmi2String name, fmi2Status status,
+                  fmi2String category, fmi2String message, ...)
+{
+    (void)name;
+    relay_message(environment, status, category, message);
+}
+#else
+static void relay(fmi3InstanceEnvironment environment, fmi3Status status, fmi3String category,
+                  fmi3String message)
+{
+    relay_message(environment, status, category, message);
+}
+#endif
+
+/* Append code point cp to out as UTF-8. */
+static char *put_utf8(char *out, unsigned long cp)
+{
+    if (cp < 0x80) {
+        *out++ = (char)cp;
+    } else if (cp < 0x800) {
+        *out++ = (char)(0xC0 | (cp >> 6));
+        *out++ = (char)(0x80 | (cp & 0x3F));
+    } else if (cp < 0x10000) {
+        *out++ = (char)(0xE0 | (cp >> 12));
+        *out++ = (char)(0x80 | ((cp >> 6) & 0x3F));
+        *out++ = (char)(0x80 | (cp & 0x3F));
+    } else {
+        *out++ = (char)(0xF0 | (cp >> 18));
+        *out++ = (char)(0x80 | ((cp >> 12) & 0x3F));
+        *out++ = (char)(0x80 | ((cp >> 6) & 0x3F));
+        *out++ = (char)(0x80 | (cp & 0x3F));
+    }
+    return out;
+}
+
+/* The refusal's own text: the first Python string literal of "PiezoFmuRefusal('...')" in a
+ * pythonfmu message, unescaped, newly allocated; NULL if the message has no such literal. */
+static char *refusal_text(const char *message)
+{
+    const char *p = strstr(message, REFUSAL);
+    if (!p) return NULL;
+    p += strlen(REFUSAL);
+    char quote = *p;
+    if (quote != '\'' && quote != '"') return NULL;
+    char *text = malloc(strlen(p) + 1); /* no escape is longer in UTF-8 than as written */
+    if (!text) return NULL;
+    char *o = text;
+    for (p++; *p && *p != quote; p++) {
+        if (*p != '\\') {
+            *o++ = *p;
+            continue;
+        }
+        switch (*++p) {
+        case 'n': *o++ = '\n'; break;
+        case 't': *o++ = '\t'; break;
+        case 'r': *o++ = '\r'; break;
+        case '\\': case '\'': case '"': *o++ = *p; break;
+        case 'x': case 'u': case 'U': {
+            int digits = *p == 'x' ? 2 : *p == 'u' ? 4 : 8;
+            unsigned long cp = 0;
+            for (int i = 0; i < digits; i++) {
+                char c = *++p;
+                int v = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+                if (v < 0) {
+                    free(text);
+                    return NULL;
+                }
+                cp = cp * 16 + (unsigned long)v;
+            }
+            o = put_utf8(o, cp);
+            break;
+        }
+        default:
+            free(text);
+            return NULL;
+        }
+    }
+    if (*p != quote) {
+        free(text);
+        return NULL;
+    }
+    *o = '\0';
+    return text;
+}
+
+/* The status of a forwarded call: Fatal with a refusal logged during the call becomes Error. */
+static Status finish(Instance *in, Status status)
+{
+    char *refusal = in->refusal;
+    if (!refusal) return status;
+    in->refusal = NULL;
+    if (status == STATUS_FATAL) {
+        char *text = refusal_text(refusal);
+        to_host(in, STATUS_ERROR, "logStatusError", text ? text : refusal);
+        free(text);
+        status = STATUS_ERROR;
+    } else {
+        to_host(in, STATUS_FATAL, "logStatusFatal", refusal);
+    }
+    free(refusal);
+    return status;
+}
+
+static Status unsupported(Instance *in, const char *function)
+{
+    if (in) {
+        char text[256];
+        snprintf(text, sizeof text, "%s is not supported by this FMU", function);
+        to_host(in, STATUS_ERROR, "logStatusError", text);
+    }
+    return STATUS_ERROR;
+}
+
+/* -- finding Python ---------------------------------------------------------------------------- */
+
+static void set_problem(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(problem, sizeof problem, fmt, ap);
+    va_end(ap);
+}
+
+#define ADVICE "Set PIEZO_FMU_PYTHON=/path/to/python, a Python 3 built with --enable-shared that " \
+               "can import numpy (for example a virtual environment's bin/python)."
+
+/* What the interpreter says of itself: a marker line, then one value per line. */
+static const char QUERY[] =
+    "import os, sys, sysconfig\n"
+    "v = sysconfig.get_config_var\n"
+    "names = [n for n in (v('INSTSONAME'), v('LDLIBRARY')) if n and '.so' in n]\n"
+    "dirs = [v('LIBDIR') or ''] + ([os.path.join('/usr/lib', v('MULTIARCH'))] if v('MULTIARCH') else [])\n"
+    "lib = next((p for p in (os.path.join(d, n) for d in dirs for n in names) if os.path.isfile(p)), '')\n"
+    "try:\n"
+    "    import numpy\n"
+    "    numpy_error = ''\n"
+    "except Exception as e:\n"
+    "    numpy_error = repr(e).replace('\\n', ' ') or 'unknown error'\n"
+    "packages = [p for p in sys.path if p.endswith(('site-packages', 'dist-packages')) and os.path.isdir(p)]\n"
+    "print('PIEZO-FMU-PYTHON')\n"
+    "print(lib)\n"
+    "print(sys.base_prefix)\n"
+    "print(os.pathsep.join(packages))\n"
+    "print(numpy_error)\n";
+
+typedef struct {
+    char libpython[PATH_MAX];
+    char home[PATH_MAX];
+    char packages[4 * PATH_MAX];
+    char numpy_error[512];
+} PythonFacts;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Line `index` (0-based) of text after the marker, copied into out. */
+static int fact_line(const char *text, int index, char *out, size_t size)
+{
+    for (int i = 0; i < index; i++) {
+        text = strchr(text, '\n');
+        if (!text) return 0;
+        text++;
+    }
+    size_t n = strcspn(text, "\n");
+    if (n >= size || text[n] != '\n') return 0;
+    memcpy(out, text, n);
+    out[n] = '\0';
+    return 1;
+}
+
+/* Run `python -c QUERY` with a deadline. Returns 1 and the facts, or 0 with `why` filled. */
+static int ask_python(const char *python, PythonFacts *facts, char *why, size_t why_size)
+{
+    if (access(python, X_OK) != 0) {
+        snprintf(why, why_size, "cannot run it (%s)", strerror(errno));
+        return 0;
+    }
+    const char *timeout_text = getenv("PIEZO_FMU_PYTHON_TIMEOUT");
+    double timeout = timeout_text && *timeout_text ? strtod(timeout_text, NULL) : DEFAULT_TIMEOUT_S;
+    if (!(timeout > 0)) timeout = DEFAULT_TIMEOUT_S;
+
+    int fds[2];
+    if (pipe2(fds, O_CLOEXEC) != 0) {
+        snprintf(why, why_size, "cannot make a pipe (%s)", strerror(errno));
+        return 0;
+    }
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 1);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 2);
+    posix_spawnattr_t attributes;
+    posix_spawnattr_init(&attributes);
+    sigset_t all, none;
+    sigfillset(&all);
+    sigemptyset(&none);
+    posix_spawnattr_setsigdefault(&attributes, &all); /* whatever the host's handlers */
+    posix_spawnattr_setsigmask(&attributes, &none);
+    posix_spawnattr_setflags(&attributes, POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETSIGMASK);
+    char *argv[] = {(char *)python, "-c", (char *)QUERY, NULL};
+    pid_t pid;
+    int spawned = posix_spawn(&pid, python, &actions, &attributes, argv, environ);
+    posix_spawn_file_actions_destroy(&actions);
+    posix_spawnattr_destroy(&attributes);
+    close(fds[1]);
+    if (spawned != 0) {
+        close(fds[0]);
+        snprintf(why, why_size, "cannot run it (%s)", strerror(spawned));
+        return 0;
+    }
+
+    char *output = malloc(MAX_QUERY_OUTPUT + 1);
+    size_t length = 0;
+    int timed_out = 0;
+    double deadline = now_s() + timeout;
+    while (output) {
+        double left = deadline - now_s();
+        if (left <= 0) {
+            timed_out = 1;
+            break;
+        }
+        struct pollfd pfd = {fds[0], POLLIN, 0};
+        int ready = poll(&pfd, 1, (int)(left * 1000.0) + 1);
+        if (ready < 0 && errno == EINTR) continue;
+        if (ready <= 0) continue;
+        char buffer[4096];
+        ssize_t n = read(fds[0], buffer, sizeof buffer);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) break;
+        size_t keep = (size_t)n < MAX_QUERY_OUTPUT - length ? (size_t)n : MAX_QUERY_OUTPUT - length;
+        memcpy(output + length, buffer, keep);
+        length += keep;
+    }
+    close(fds[0]);
+    /* Its output has ended; it gets until the deadline to exit too. */
+    int wstatus = 0;
+    pid_t waited = 0;
+    while (!timed_out && output) {
+        waited = waitpid(pid, &wstatus, WNOHANG);
+        if (waited != 0 && !(waited < 0 && errno == EINTR)) break; /* it exited, or is not ours to wait for */
+        if (now_s() >= deadline) timed_out = 1;
+        else poll(NULL, 0, 10);
+    }
+    if (timed_out || !output) {
+        kill(pid, SIGKILL);
+        do waited = waitpid(pid, &wstatus, 0);
+        while (waited < 0 && errno == EINTR);
+    }
+    if (!output) {
+        snprintf(why, why_size, "out of memory");
+        return 0;
+    }
+    output[length] = '\0';
+
+    int ok = 0;
+    const char *marker = strstr(output, "PIEZO-FMU-PYTHON\n");
+    if (timed_out) {
+        snprintf(why, why_size, "it did not answer within %g s (PIEZO_FMU_PYTHON_TIMEOUT)", timeout);
+    } else if (!marker || (waited == pid && !(WIFEXITED(wstatus) && WEXITSTATUS(wstatus) == 0))) {
+        char *end = output + length; /* its last line of output, if any, says why */
+        while (end > output && (end[-1] == '\n' || end[-1] == ' ')) *--end = '\0';
+        char *last = end;
+        while (last > output && last[-1] != '\n') last--;
+        snprintf(why, why_size, "it is not a working Python 3 (%s%s%.200s)",
+                 waited == pid && WIFSIGNALED(wstatus) ? "killed by a signal" : "it failed", *last ? ": " : "",
+                 last);
+    } else {
+        marker += strlen("PIEZO-FMU-PYTHON\n");
+        ok = fact_line(marker, 0, facts->libpython, sizeof facts->libpython)
+             && fact_line(marker, 1, facts->home, sizeof facts->home)
+             && fact_line(marker, 2, facts->packages, sizeof facts->packages)
+             && fact_line(marker, 3, facts->numpy_error, sizeof facts->numpy_error);
+        if (!ok) snprintf(why, why_size, "its answer could not be read");
+    }
+    free(output);
+    return ok;
+}
+
+/* path of `name` in the directories of PATH (the default search path if PATH is unset) */
+static int search_path(const char *name, char *out, size_t size, char *searched, size_t searched_size)
+{
+    const char *path = getenv("PATH");
+    char fallback[256] = "";
+    if (!path) {
+        confstr(_CS_PATH, fallback, sizeof fallback);
+        path = fallback;
+    }
+    snprintf(searched, searched_size, "%s%s", path, getenv("PATH") ? "" : " (PATH unset: the default)");
+    while (*path) {
+        size_t n = strcspn(path, ":");
+        if (n > 0 && n + strlen(name) + 2 <= size) {
+            snprintf(out, size, "%.*s/%s", (int)n, path, name);
+            struct stat st;
+            if (stat(out, &st) == 0 && S_ISREG(st.st_mode) && access(out, X_OK) == 0) return 1;
+        }
+        path += n + (path[n] == ':');
+    }
+    return 0;
+}
+
+/* Add `entries` (os.pathsep-joined) to the end of PYTHONPATH, unless PYTHONPATH ends with them. */
+static int extend_pythonpath(const char *entries)
+{
+    if (!*entries) return 1;
+    const char *old = getenv("PYTHONPATH");
+    if (!old || !*old) return setenv("PYTHONPATH", entries, 1) == 0;
+    size_t n = strlen(old), m = strlen(entries);
+    if (n > m && strcmp(old + n - m, entries) == 0 && old[n - m - 1] == ':') return 1;
+    char *joined = malloc(n + m + 2);
+    if (!joined) return 0;
+    snprintf(joined, n + m + 2, "%s:%s", old, entries);
+    int ok = setenv("PYTHONPATH", joined, 1) == 0;
+    free(joined);
+    return ok;
+}
+
+/* Put a libpython into the process, or say why not (returns 0 and sets `problem`). */
+static int provide_python(void)
+{
+    if (dlsym(RTLD_DEFAULT, "Py_IsInitialized")) return 1; /* the host has Python: use it */
+
+    char python[PATH_MAX], tried[PATH_MAX + 64], why[1024];
+    const char *chosen = getenv("PIEZO_FMU_PYTHON");
+    if (chosen && *chosen) {
+        snprintf(python, sizeof python, "%s", chosen);
+        snprintf(tried, sizeof tried, "PIEZO_FMU_PYTHON=%s", chosen);
+    } else {
+        char searched[PATH_MAX];
+        if (!search_path("python3", python, sizeof python, searched, sizeof searched)) {
+            set_problem("piezo-fmu: no Python for this FMU: PIEZO_FMU_PYTHON is unset and there is no "
+                        "python3 on PATH=%s. " ADVICE, searched);
+            return 0;
+        }
+        snprintf(tried, sizeof tried, "python3 on PATH (%s)", python);
+    }
+
+    PythonFacts facts;
+    if (!ask_python(python, &facts, why, sizeof why)) {
+        set_problem("piezo-fmu: no Python for this FMU: tried %s: %s. " ADVICE, tried, why);
+        return 0;
+    }
+    if (!facts.libpython[0]) {
+        set_problem("piezo-fmu: no Python for this FMU: tried %s: it has no shared libpython (it was "
+                    "built without --enable-shared). " ADVICE, tried);
+        return 0;
+    }
+    if (facts.numpy_error[0]) {
+        set_problem("piezo-fmu: no Python for this FMU: tried %s: it cannot import numpy (%s). " ADVICE,
+                    tried, facts.numpy_error);
+        return 0;
+    }
+    if (!dlopen(facts.libpython, RTLD_NOW | RTLD_GLOBAL)) {
+        set_problem("piezo-fmu: no Python for this FMU: tried %s: cannot load %s (%s). " ADVICE, tried,
+                    facts.libpython, dlerror());
+        return 0;
+    }
+    if (setenv("PYTHONHOME", facts.home, 0) != 0 || !extend_pythonpath(facts.packages)) {
+        set_problem("piezo-fmu: cannot set PYTHONHOME and PYTHONPATH for %s: %s", tried, strerror(errno));
+        return 0;
+    }
+    return 1;
+}
+
+/* -- loading pythonfmu's binary ------------------------------------------------------------------ */
+
+static void load(void)
+{
+    Dl_info self;
+    if (!dladdr((void *)&load, &self) || !self.dli_fname) {
+        set_problem("piezo-fmu: the FMU's binary cannot find its own path");
+        return;
+    }
+    char real[PATH_MAX + sizeof REAL_SUFFIX];
+    size_t n = strlen(self.dli_fname);
+    if (n < 3 || n >= PATH_MAX || strcmp(self.dli_fname + n - 3, ".so") != 0) {
+        set_problem("piezo-fmu: unexpected name of the FMU's binary: %s", self.dli_fname);
+        return;
+    }
+    snprintf(real, sizeof real, "%.*s%s", (int)(n - 3), self.dli_fname, REAL_SUFFIX);
+    if (!provide_python()) return;
+    void *library = dlopen(real, RTLD_NOW | RTLD_LOCAL);
+    if (!library) {
+        set_problem("piezo-fmu: cannot load pythonfmu's binary: %s", dlerror());
+        return;
+    }
+    for (int i = 0; i < F_COUNT; i++) real_functions[i] = dlsym(library, REAL_NAMES[i]);
+}
+
+/* -- instances -------------------------------------------------------------------------------- */
+
+static void free_instance(Instance *in)
+{
+    if (!in) return;
+    for (size_t i = 0; i < in->ncategories; i++) free(in->categories[i]);
+    free(in->categories);
+    free(in->refusal);
+#if FMI_VERSION == 2
+    free(in->name);
+#endif
+    free(in);
+}
+
+/* pythonfmu's binary loaded (once per process); else the problem said through the host's logger */
+static int ready(Instance *in, int instantiate)
+{
+    pthread_once(&load_once, load);
+    if (!problem[0] && !real_functions[instantiate]) {
+        set_problem("piezo-fmu: pythonfmu's binary has no %s", REAL_NAMES[instantiate]);
+    }
+    if (problem[0]) to_host(in, STATUS_ERROR, "logStatusError", problem);
+    return !problem[0];
+}
+
+static Status set_debug_logging(Instance *in, int on, size_t n, const char *const categories[])
+{
+    if (!in) return STATUS_ERROR;
+    char **copies = n ? calloc(n, sizeof *copies) : NULL;
+    if (n && !copies) return STATUS_ERROR;
+    for (size_t i = 0; i < n; i++) {
+        copies[i] = strdup(categories[i] ? categories[i] : "");
+        if (!copies[i]) {
+            while (i > 0) free(copies[--i]);
+            free(copies);
+            return STATUS_ERROR;
+        }
+    }
+    for (size_t i = 0; i < in->ncategories; i++) free(in->categories[i]);
+    free(in->categories);
+    in->debug_logging = on;
+    in->ncategories = n;
+    in->categories = copies;
+    return STATUS_OK;
+}
+
+/* FreeInstance: pythonfmu's instance (its free function is `index`), then ours. */
+static void release(Instance *in, int index)
+{
+    if (!in) return;
+    void (*free_real)(void *) = (void (*)(void *))real_functions[index];
+    if (free_real && in->real) free_real(in->real);
+    free_instance(in);
+}
+
+/* After pythonfmu's instantiate: a refusal it logged is said as an error; NULL frees ours. */
+static void *instantiated(Instance *in)
+{
+    finish(in, STATUS_FATAL);
+    if (in->real) return in;
+    free_instance(in);
+    return NULL;
+}
+
+#if FMI_VERSION == 2
+
+const char *fmi2GetTypesPlatform(void)
+{
+    return fmi2TypesPlatform;
+}
+
+const char *fmi2GetVersion(void)
+{
+    return fmi2Version;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    if (!functions || !fmuResourceLocation) return NULL;
+    Instance *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->host = *functions;
+    in->name = strdup(instanceName ? instanceName : "");
+    in->debug_logging = loggingOn;
+    if (!in->name || !ready(in, F_fmi2Instantiate)) {
+        free_instance(in);
+        return NULL;
+    }
+    in->relay = (fmi2CallbackFunctions){relay, functions->allocateMemory, functions->freeMemory, NULL, in};
+    in->real = ((fmi2InstantiateTYPE *)real_functions[F_fmi2Instantiate])(
+        in->name, fmuType, fmuGUID ? fmuGUID : "", fmuResourceLocation, &in->relay, visible, fmi2True);
+    return instantiated(in);
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    release(c, F_fmi2FreeInstance);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    return set_debug_logging(c, loggingOn, nCategories, categories);
+}
+
+#else
+
+const char *fmi3GetVersion(void)
+{
+    return fmi3Version;
+}
+
+static Instance *new_instance(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
+                              fmi3Boolean loggingOn, fmi3String resourcePath, int instantiate)
+{
+    Instance *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->host_environment = environment;
+    in->host_log = log;
+    in->debug_logging = loggingOn;
+    if (!resourcePath) to_host(in, fmi3Error, "logStatusError", "piezo-fmu: the FMU needs its resources folder");
+    if (!resourcePath || !ready(in, instantiate)) {
+        free_instance(in);
+        return NULL;
+    }
+    return in;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage)
+{
+    Instance *in = new_instance(instanceEnvironment, logMessage, loggingOn, resourcePath, F_fmi3InstantiateModelExchange);
+    if (!in) return NULL;
+    in->real = ((fmi3InstantiateModelExchangeTYPE *)real_functions[F_fmi3InstantiateModelExchange])(
+        instanceName, instantiationToken, resourcePath, visible, fmi3True, in, relay);
+    return instantiated(in);
+}
+
+/* pythonfmu3 calls no intermediate update; it gets none, so that no call can reach the host with
+ * the loader's instance as its environment. */
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    (void)intermediateUpdate;
+    Instance *in = new_instance(instanceEnvironment, logMessage, loggingOn, resourcePath,
+                                    F_fmi3InstantiateCoSimulation);
+    if (!in) return NULL;
+    in->real = ((fmi3InstantiateCoSimulationTYPE *)real_functions[F_fmi3InstantiateCoSimulation])(
+        instanceName, instantiationToken, resourcePath, visible, fmi3True, eventModeUsed, earlyReturnAllowed,
+        requiredIntermediateVariables, nRequiredIntermediateVariables, in, relay, NULL);
+    return instantiated(in);
+}
+
+/* pythonfmu3 throws out of this one (std::terminate in the host): answered here. */
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible,
+                                               fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage,
+                                               fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
+    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+    if (logMessage)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "piezo-fmu: this FMU supports co-simulation and model exchange, not scheduled execution");
+    return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance instance)
+{
+    release(instance, F_fmi3FreeInstance);
+}
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                               const fmi3String categories[])
+{
+    return set_debug_logging(instance, loggingOn, nCategories, categories);
+}
+
+#endif

@@ -1,0 +1,230 @@
+"""One bracket of a phase: its exact trajectory and every event on it.
+
+A bracket is a stretch of at most ``h`` seconds of one phase (``propagation.py``), on which the
+deviation state is a polynomial in the normalised time ``s in [0, 1]``. Opening a bracket
+computes, in one matrix product from its start state, the Taylor coefficients of the state, the
+power and Bernstein coefficients of the phase's event functions
+(:func:`piezo_fmu.model.dynamics.event_functionals`) and the rates of the energy ledger
+(:func:`piezo_fmu.model.energy.energy_rates`); then it locates the phase switch (the first
+terminal event) and the non-terminal events before it (``roots.py``).
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from ..model.dynamics import DU, DW, FREE, LEFT, RIGHT, approach_sign, mirror_signs
+from .propagation import POWERS_AT_START, STATE_TERMS, LinearPhase
+from .roots import _TO_BERNSTEIN, crossings
+
+#: Non-terminal events: a maximum of ``p``, a peak of ``delta``, a peak of the circuit's ``|V|``.
+MAXIMUM, PEAK, VOLTAGE_PEAK = 0, 1, 2
+#: Rounding level of an event function, in ulp of the largest state term it is made of.
+NOISE_ULPS = 64
+#: Largest size of the terms of a bracket (state, event functions, the ledger's rates): their
+#: squares, in the ledger, stay inside double range.
+STATE_LIMIT = 1e150
+EPS = float(np.finfo(float).eps)
+
+
+@dataclass(slots=True)
+class Bracket:
+    """One bracket of the present phase: its exact trajectory and its located events.
+
+    ``c`` holds the Taylor coefficients of the deviation state over ``[t_start, t_start + tau]``
+    (normalised time ``s`` in [0, 1]); ``base`` (m) and ``v`` (m/s) are the base there. The
+    phase switches at ``s_switch`` (inf: not in this bracket) to side ``switch_to``; ``events``
+    are the non-terminal events ``(s, kind)`` still ahead; ``s`` is where the state stands.
+    ``rates`` holds the ledger's rates over the bracket (``energy_rates``), and ``ledger``
+    their primitives once the ledger of the open bracket has been read.
+    """
+
+    c: np.ndarray
+    t_start: float
+    tau: float
+    base: float
+    v: float
+    s: float = 0.0
+    s_switch: float = math.inf
+    switch_to: int = FREE
+    events: list = field(default_factory=list)
+    delta: np.ndarray | None = None
+    rates: np.ndarray | None = None
+    ledger: np.ndarray | None = None
+    #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
+    powers: np.ndarray = field(default_factory=lambda: POWERS_AT_START)
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        for name in ("c", "delta", "rates", "ledger", "powers"):
+            value = getattr(self, name)
+            data[name] = None if value is None else value.tolist()
+        data["events"] = [list(e) for e in self.events]
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Bracket":
+        data = dict(data)
+        for name in ("c", "delta", "rates", "ledger", "powers"):
+            if data[name] is not None:
+                data[name] = np.array(data[name], dtype=float)
+        data["events"] = [(float(s), int(k)) for s, k in data["events"]]
+        return cls(**data)
+
+
+class BracketMaps:
+    """The linear maps a bracket of one phase needs from its start state ``x``, stacked as
+    columns so that one product ``x @ stacked`` gives them all:
+
+    - the Taylor coefficients of the state (ORDER+1 rows of n);
+    - the power and the Bernstein coefficients of the three event functions (``functionals``,
+      with the base velocity left out of ``p'``), ORDER+1 each;
+    - the power coefficients of the ledger's rates (``energy_rates``): ``u'``, ``delta'`` (zero in
+      free flight) and ``K u + C u'``.
+    """
+
+    def __init__(self, phase: LinearPhase, functionals: np.ndarray, rates: np.ndarray):
+        self.phase = phase
+        terms = phase.bracket_terms  # (k, i, j)
+        n = terms.shape[1]
+        power = (np.concatenate([functionals, rates], axis=1).T @ terms).transpose(1, 0, 2)  # (row, k, j)
+        bernstein_rows = _TO_BERNSTEIN.T @ power[:3]
+        self.stacked = np.ascontiguousarray(
+            np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)]).T)
+        #: Where the state's coefficients end and the rows of the functions begin.
+        self.split = STATE_TERMS * n
+        #: Rows (one per event function) of ``sum_i |functional_i| max_k |terms_k[i, j]|``: with the
+        #: sizes ``|x_j|`` of the start state, a bound on the state terms an event function is made of.
+        self.noise_rows = (np.abs(functionals).T @ np.abs(terms).max(axis=0)).tolist()
+        #: Sums of those rows: times the sum of the ``|x_j|``, a bound on the rounding level.
+        self.noise_bounds = [sum(row) for row in self.noise_rows]
+        #: The largest column sum of ``|stacked|``: times the sum of the ``|x_j|``, a bound on the
+        #: size of everything a bracket is made of.
+        self.size_bound = float(np.abs(self.stacked).sum(axis=0).max())
+
+    def mirrored(self, phase: LinearPhase, signs: np.ndarray) -> "BracketMaps":
+        """The maps of the other barrier: its phase is this one's mirrored by ``signs``
+        (``LinearPhase.mirrored``), and its event functions ``delta`` and ``delta'`` are this one's
+        in the mirrored state, negated (``event_functionals``); the rates are the same."""
+        mirror = object.__new__(BracketMaps)
+        mirror.phase, mirror.split, mirror.noise_rows, mirror.noise_bounds = phase, self.split, self.noise_rows, self.noise_bounds
+        mirror.size_bound = self.size_bound
+        mirror.stacked = self.stacked * signs[:, None] * mirror_rows(len(signs))
+        return mirror
+
+
+@lru_cache(maxsize=None)
+def mirror_rows(n: int) -> np.ndarray:
+    """The column signs of ``BracketMaps.stacked`` between the barriers, for states of size ``n``:
+    the state's terms like the state, ``delta`` and ``delta'`` negated, ``p'`` and the rates kept."""
+    events = np.repeat([-1.0, -1.0, 1.0], STATE_TERMS)
+    rows = np.concatenate([np.tile(mirror_signs(n), STATE_TERMS), events, np.ones(3 * STATE_TERMS), events])
+    rows.flags.writeable = False
+    return rows
+
+
+def rounding(row: list[float], sizes: list[float]) -> float:
+    """The rounding level of an event function: ``NOISE_ULPS`` ulp of the bound on its terms
+    made from one row of ``BracketMaps.noise_rows`` and the sizes of the start state."""
+    return NOISE_ULPS * EPS * sum(map(operator.mul, row, sizes))
+
+
+class StateOverflow(ArithmeticError):
+    """The terms of a new bracket would leave double range (the caller says which state did it)."""
+
+
+class BracketOpener:
+    """Opens the brackets of one damper: its maps per phase, the size under which an event
+    function at a bracket start counts as zero (m), and the main spring and damper (``K`` N/m,
+    ``C`` N s/m), which decide the side of a body at rest on a barrier."""
+
+    def __init__(self, maps: dict[int, BracketMaps], zero: float, K: float, C: float):
+        self.maps, self.zero, self.K, self.C = maps, zero, K, C
+
+    def open(self, side: int, xs: list[float], t: float, y: float, v: float) -> Bracket:
+        """A new bracket of phase ``side`` from the deviation state ``xs`` at time ``t`` (s), with
+        the base at ``y`` (m) moving at ``v`` (m/s), with its switch and its events on it located
+        (all but the circuit's voltage peaks). Raises :class:`StateOverflow`."""
+        maps = self.maps[side]
+        phase = maps.phase
+        sizes = list(map(abs, xs))
+        total = sum(sizes)  # NaN and inf propagate through it
+        if not total * maps.size_bound < STATE_LIMIT:
+            # Root isolation would halve NaN coefficients down to 2**-40: refuse instead.
+            raise StateOverflow
+        # One product gives the Taylor coefficients of the state, and the power and Bernstein
+        # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
+        z = np.array(xs) @ maps.stacked
+        functions = z[maps.split:].reshape(9, STATE_TERMS)  # event functions, rates, Bernstein rows
+        c, G, rates, B = z[:maps.split].reshape(STATE_TERMS, -1), functions[:3], functions[3:6], functions[6:]
+        if v != 0.0:
+            G[2, 0] += v
+            B[2] += v
+        br = Bracket(c=c, t_start=t, tau=phase.h, base=y, v=v, rates=rates)
+        # The rounding level of each event function: a few ulp of the largest state terms that
+        # make it up, bounded from the start state (made only for the functions that need it).
+        noise_rows = maps.noise_rows
+        n_terminal = 2 if side == FREE else 1
+        direction = +1 if side == FREE else -1
+        targets = (RIGHT, LEFT) if side == FREE else (FREE,)
+        values = B.tolist()
+        for j in range(n_terminal):
+            g, b, row = G[j], B[j], values[j]
+            start_value = row[0]  # the first Bernstein coefficient is the value at the start
+            near_zero = abs(start_value) <= max(self.zero, NOISE_ULPS * EPS * maps.noise_bounds[j] * total)
+            if not near_zero and (min(row) > 0.0 or max(row) < 0.0):
+                continue  # one strict sign, away from zero at the start: no root
+            noise = rounding(noise_rows[j], sizes)
+            if near_zero and abs(start_value) <= max(self.zero, noise):
+                # At a switch the function that fired is zero to rounding: its sign just after
+                # the start is that of the relative velocity towards the barrier. When that is
+                # zero to rounding too (a body coming to rest on a barrier), the relative
+                # acceleration without the barrier's force decides. Both tests read the same
+                # state the same way in either phase, so the phases cannot hand over to each
+                # other forever at one instant.
+                barrier = targets[j] if side == FREE else side
+                rate = barrier * (xs[DW] - xs[DU])
+                if abs(rate) > NOISE_ULPS * EPS * (sizes[DW] + sizes[DU]):
+                    start = 1 if rate > 0.0 else -1
+                else:
+                    start = approach_sign(self.K, self.C, xs[0], xs[DU], barrier)
+                if start == direction:
+                    br.s_switch, br.switch_to = 0.0, targets[j]
+                    return br
+                # The start value set to zero: every Bernstein coefficient holds it with weight 1.
+                # Most often the rest then has one strict sign (rounding is monotonic, so the
+                # extremes of the shifted coefficients are the shifted extremes): no root.
+                rest = row[1:]
+                if min(rest) - start_value > 0.0 or max(rest) - start_value < 0.0:
+                    continue
+                g = g.copy()
+                g[0] = 0.0
+                b = b - start_value
+                row = [value - start_value for value in row]
+            roots = crossings(g, direction, b, noise, row)
+            if roots and roots[0] < br.s_switch:
+                br.s_switch, br.switch_to = roots[0], targets[j]
+        # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
+        events = [(s, MAXIMUM) for s in _falls(G, B, values, 2, sizes, noise_rows, v) if s <= br.s_switch]
+        if side != FREE:
+            br.delta = G[0]
+            events += [(s, PEAK) for s in _falls(G, B, values, 1, sizes, noise_rows, v) if s <= br.s_switch]
+            events.sort()
+        br.events = events
+        return br
+
+
+def _falls(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
+           v: float) -> list[float]:
+    """Where event function ``j`` falls through zero: maxima of ``p`` (j = 2, where the base
+    velocity adds to the rounding level) and peaks of ``delta`` (j = 1, in contact)."""
+    row = values[j]
+    if min(row) > 0.0 or max(row) < 0.0:
+        return []
+    noise = rounding(noise_rows[j], sizes) + (NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
+    return crossings(G[j], -1, B[j], noise, row)

@@ -1,0 +1,129 @@
+"""The shape of the code: the physics apart from the numerics, and both apart from FMI.
+
+- Imports run one way: ``piezo_fmu.fmi`` may import the solver and the model, the solver may
+  import the model, and the model imports neither; the harness never imports the core at all.
+- No import cycle between modules, inside the package or the harness (lazy imports in functions
+  count too).
+- No module over 400 lines, no class over 250.
+- No file of the project points at the team's folder beside the clone (``..`` then ``shared``): a
+  user's clone has no such folder.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src" / "piezo_fmu"
+HARNESS = ROOT / "harness"
+MAX_MODULE_LINES = 400
+MAX_CLASS_LINES = 250
+LAYERS = {"model": 0, "solver": 1, "fmi": 2}
+
+
+def module_name(path: Path) -> str:
+    if PACKAGE in path.parents:
+        parts = ("piezo_fmu",) + path.relative_to(PACKAGE).with_suffix("").parts
+    else:
+        parts = ("harness",) + path.relative_to(HARNESS).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports(path: Path) -> set[str]:
+    """The modules ``path`` imports anywhere in it, resolved to absolute names."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")
+                anchor = anchor[:len(anchor) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return found
+
+
+def sources(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def layer(module: str) -> int | None:
+    parts = module.split(".")
+    return LAYERS.get(parts[1]) if len(parts) > 1 and parts[0] == "piezo_fmu" else None
+
+
+@pytest.mark.parametrize("path", sources(PACKAGE), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_imports_run_one_way_fmi_then_solver_then_model(path):
+    own = layer(module_name(path))
+    if own is None:
+        return  # the package's __init__ re-exports the layers below FMI
+    upward = sorted(m for m in imports(path) if (other := layer(m)) is not None and other > own)
+    assert not upward, f"{path.name} ({module_name(path)}) imports from a layer above it: {upward}"
+
+
+def test_the_harness_never_imports_the_core():
+    for path in sources(HARNESS):
+        core = sorted(m for m in imports(path) if m.split(".")[0] == "piezo_fmu")
+        assert not core, f"{path} imports {core}"
+
+
+@pytest.mark.parametrize("folder", [PACKAGE, HARNESS], ids=["piezo_fmu", "harness"])
+def test_no_import_cycles_between_modules(folder):
+    modules = {module_name(p): p for p in sources(folder)}
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for imported in imports(path):
+            # "pkg.mod.name" may name an attribute of pkg.mod: keep the longest module it names.
+            while imported and imported not in modules:
+                imported = imported.rpartition(".")[0]
+            if imported and imported != name and not name.startswith(imported + "."):
+                targets.add(imported)
+        # A package's __init__ importing its submodules is not a cycle with them.
+        graph[name] = {t for t in targets if not (path.name == "__init__.py" and t.startswith(name + "."))}
+    state: dict[str, int] = {}
+
+    def visit(node, stack):
+        state[node] = 1
+        for nxt in graph[node]:
+            if state.get(nxt) == 1:
+                cycle = stack[stack.index(nxt):] + [nxt]
+                pytest.fail(f"import cycle: {' -> '.join(cycle)}")
+            if nxt not in state:
+                visit(nxt, stack + [nxt])
+        state[node] = 2
+
+    for node in graph:
+        if node not in state:
+            visit(node, [node])
+
+
+@pytest.mark.parametrize("path", sources(PACKAGE), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_no_module_over_400_lines_and_no_class_over_250(path):
+    text = path.read_text()
+    assert text.count("\n") <= MAX_MODULE_LINES, f"{path}: {text.count(chr(10))} lines"
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ClassDef):
+            length = node.end_lineno - node.lineno + 1
+            assert length <= MAX_CLASS_LINES, f"{path}: class {node.name} has {length} lines"
+
+
+def test_no_file_of_the_project_points_at_the_team_folder():
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    offenders = []
+    for name in filter(None, listed.decode().split("\0")):
+        path = ROOT / name
+        if name.startswith(".ci/") or not path.is_file():
+            continue
+        if b"../" + b"shared" in path.read_bytes():
+            offenders.append(name)
+    assert not offenders, f"these files point at ../{'shared'}, which a user's clone does not have: {offenders}"
