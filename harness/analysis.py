@@ -17,7 +17,6 @@ perfectibility then use it. Eq. 29 stays the default.
 from __future__ import annotations
 
 import json
-import threading
 from pathlib import Path
 from typing import Optional
 
@@ -233,30 +232,6 @@ def save_dataset(ds, path: Path) -> str:
     raise RuntimeError("no NetCDF engine: install h5netcdf (with h5py) or netCDF4")
 
 
-def preload() -> threading.Thread:
-    """Import and warm up, in a background thread, what writing results needs: xarray (with the
-    duck-array modules it probes, dask.array among them: 0.5 s), the NetCDF engine (a tiny file
-    written), scipy.ndimage and matplotlib (fonts, mathtext). About 1.5 s of imports that the main
-    process, which only waits on its workers during a sweep, would otherwise spend after the last
-    point. Join the thread before writing."""
-    thread = threading.Thread(target=_preload, name="preload-outputs", daemon=True)
-    thread.start()
-    return thread
-
-
-def _preload() -> None:
-    import tempfile
-
-    import scipy.ndimage  # noqa: F401 - the zones' connected parts
-    import xarray as xr
-
-    from . import figures
-
-    with tempfile.TemporaryDirectory() as folder:
-        save_dataset(xr.Dataset({"x": ("i", np.zeros(2))}), Path(folder) / "warm-up.nc")
-    figures.warm_up()
-
-
 def open_dataset(path: Path):
     import xarray as xr
 
@@ -287,3 +262,15 @@ def zone_summary_lines(report: dict, show) -> list[str]:
 
 def _fmt(value: Optional[float]) -> str:
     return "n/a" if value is None else f"{value:.1f}"
+
+
+def bands(ratios, mask) -> list[list[float]]:
+    """Runs of consecutive ``True`` in ``mask`` as ``[first ratio, last ratio]``."""
+    runs, start = [], None
+    for k, inside in enumerate(list(mask) + [False]):
+        if inside and start is None:
+            start = k
+        elif not inside and start is not None:
+            runs.append([float(ratios[start]), float(ratios[k - 1])])
+            start = None
+    return runs

@@ -435,7 +435,7 @@ def frequency_figure_calls(ds, folder: Path) -> list[tuple]:
 
 
 def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, path: Path) -> Path:
-    from .frequency_response import bands
+    from .analysis import bands
 
     ratio = ds["ratio"].values
     half_step = 0.5 * (ratio[-1] - ratio[0]) / max(1, len(ratio) - 1)

@@ -33,6 +33,7 @@ from typing import Optional
 
 import numpy as np
 
+from .analysis import bands
 from .fmu import FmuModel, FmuRunError, Instance
 from .steady_state import STATE_PARAMETERS, HarmonicDrive, Settings, SteadyState
 from .store import PointStore, open_folder
@@ -230,7 +231,7 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None
     """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives."""
     from tqdm import tqdm
 
-    from .analysis import preload
+    from .warmup import preload
 
     tasks = run.first_tasks()
     loading = preload()
@@ -329,18 +330,6 @@ def directions_differ(data: dict, settled: np.ndarray) -> np.ndarray:
                                                                                             amplitude[:, 1, :])
     other = (order[:, 0, :] != order[:, 1, :]) | (impacts[:, 0, :] != impacts[:, 1, :])
     return both & (apart | other)
-
-
-def bands(ratios, mask) -> list[list[float]]:
-    """Runs of consecutive ``True`` in ``mask`` as ``[first ratio, last ratio]``."""
-    runs, start = [], None
-    for k, inside in enumerate(list(mask) + [False]):
-        if inside and start is None:
-            start = k
-        elif not inside and start is not None:
-            runs.append([float(ratios[start]), float(ratios[k - 1])])
-            start = None
-    return runs
 
 
 def summarize(ds) -> dict:

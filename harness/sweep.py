@@ -27,6 +27,7 @@ from . import analysis, figures
 from .fmu import FmuModel
 from .spec import SweepSpec, UsageError
 from .store import SPEC_FILE, PointStore, open_folder
+from .warmup import preload
 
 
 @dataclass
@@ -88,7 +89,7 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> N
                     for index, values in run.todo())
     total = sum(run.spec.size for run in runs)
     finished = total - len(todo)
-    preload = analysis.preload()
+    loading = preload()
     bar = tqdm(total=total, initial=finished, unit="pt", desc="sweep", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True
@@ -103,7 +104,7 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> N
         for store in stores:
             store.close()
         backend.close(cancel=interrupted)
-        preload.join()
+        loading.join()
 
 
 def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panels: Optional[dict], out: Path,
