@@ -51,10 +51,10 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
     run = fr.open_frequency_run(model, spec, out, resume=False, force=True)
     run.begin()
     begin = time.perf_counter()
-    fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
+    warming = fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
     simulation_s = time.perf_counter() - begin
     begin = time.perf_counter()
-    result = fr.finish(model, run, jobs)
+    result = fr.finish(model, run, jobs, warming)
     outputs_s = time.perf_counter() - begin
     shutil.rmtree(unzipdir, ignore_errors=True)
     records = list(run.done.values())
@@ -78,7 +78,7 @@ def free_decay(model: FmuModel, out: Path, jobs: int) -> dict:
         run.begin()
     unzipdir = model.extract()
     begin = time.perf_counter()
-    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False)
+    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False).join()
     wall = time.perf_counter() - begin
     shutil.rmtree(unzipdir, ignore_errors=True)
     records = [r for run in runs for r in run.done.values()]

@@ -103,13 +103,13 @@ def main() -> None:
         # 1. the engine, worker start-up included
         unzipdir = model.extract()
         begin, begin_cpu = time.perf_counter(), time.process_time()
-        execute(runs, ProcessPool(model, unzipdir, args.jobs), progress=False)
+        warming = execute(runs, ProcessPool(model, unzipdir, args.jobs), progress=False)
         engine_s, main_cpu_s = time.perf_counter() - begin, time.process_time() - begin_cpu
         shutil.rmtree(unzipdir, ignore_errors=True)
         begin, before = time.perf_counter(), os.times()
         output_parts: dict = {}
         results = write_results(model, runs, [name for name, _, _ in sweeps], panels, out, jobs=args.jobs,
-                                timings=output_parts)
+                                timings=output_parts, warming=warming)
         outputs_s, after = time.perf_counter() - begin, os.times()
         # CPU of this process and of the forked figure processes (reaped, so counted in os.times).
         outputs_cpu_s = sum(getattr(after, f) - getattr(before, f)

@@ -562,6 +562,7 @@ def _frequency_response(args) -> int:
         spec = _frequency_spec(args, model, instance)
         run = fr.open_frequency_run(model, spec, args.out, args.resume, args.force)
         remaining = run.total - len(run.done)
+        warming = None
         previous = signal.signal(signal.SIGTERM, _interrupt)
         try:
             run.begin()
@@ -571,7 +572,7 @@ def _frequency_response(args) -> int:
                 print(f"{PROG} frequency-response: {remaining} of {run.total} points to run on {backend.description}",
                       file=sys.stderr)
                 try:
-                    fr.execute(run, backend, progress=False if args.no_progress else None)
+                    warming = fr.execute(run, backend, progress=False if args.no_progress else None)
                 except KeyboardInterrupt:
                     print(f"\n{PROG} frequency-response: interrupted; {len(run.done)} of {run.total} points are saved "
                           f"in {run.folder / 'points.jsonl'}; run the same command with --resume to finish",
@@ -582,7 +583,7 @@ def _frequency_response(args) -> int:
     finally:
         instance.free()
         shutil.rmtree(unzipdir, ignore_errors=True)
-    result = fr.finish(model, run, jobs)
+    result = fr.finish(model, run, jobs, warming)
     print("\n".join(fr.summary_lines(result["summary"])))
     print(f"  results in {run.folder}")
     return 0
@@ -812,6 +813,7 @@ def _sweep(args) -> int:
     instance.free()
 
     remaining = sum(len(run.todo()) for run in runs)
+    warming = None
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         if remaining:
@@ -824,7 +826,7 @@ def _sweep(args) -> int:
                   f"({runs[0].spec.stop_time:g} s each, communication step {runs[0].spec.step:g} s)",
                   file=sys.stderr)
             try:
-                execute(runs, backend, progress=False if args.no_progress else None)
+                warming = execute(runs, backend, progress=False if args.no_progress else None)
             except KeyboardInterrupt:
                 finished = sum(len(run.done) for run in runs)
                 print(f"\n{PROG} sweep: interrupted; {finished} of {total} points are saved in "
@@ -836,7 +838,7 @@ def _sweep(args) -> int:
         shutil.rmtree(unzipdir, ignore_errors=True)
 
     names = [name for name, _, _ in sweeps]
-    results = write_results(model, runs, names, panels, out, quantile, args.damping, jobs)
+    results = write_results(model, runs, names, panels, out, quantile, args.damping, jobs, warming=warming)
     for name, run in zip(names, runs):
         print("\n".join(analysis.zone_summary_lines(results[name]["zones"], display(results[name]["dataset"]))))
         failed = int((results[name]["dataset"]["status"] == "error").sum())

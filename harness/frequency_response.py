@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -227,8 +228,9 @@ def open_frequency_run(model: FmuModel, spec: FrequencySpec, folder: Path, resum
     return FrequencyRun(spec, folder, done, header, start_over)
 
 
-def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None:
-    """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives."""
+def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> threading.Thread:
+    """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives; return
+    the warm-up of the writers started meanwhile (:func:`harness.warmup.preload`)."""
     from tqdm import tqdm
 
     from .warmup import preload
@@ -248,7 +250,7 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None
         finally:
             bar.close()
             backend.close(cancel=interrupted)
-            loading.join()
+    return loading
 
 
 # -- results ---------------------------------------------------------------------------------------
@@ -412,9 +414,11 @@ def tidy_frame(ds):
     return frame
 
 
-def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
-    """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes);
-    return ``{"dataset", "summary", "files"}``."""
+def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1, warming: Optional[threading.Thread] = None) -> dict:
+    """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes), after
+    the warm-up ``warming`` of :func:`execute`; return ``{"dataset", "summary", "files"}``."""
+    if warming is not None:
+        warming.join()
     from . import figures
     from .analysis import save_dataset
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -77,7 +78,7 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     return SweepRun(spec, folder, done, header, start_over)
 
 
-def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> None:
+def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> threading.Thread:
     """Run every unfinished point of ``runs`` on ``backend``, appending each record to its
     sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal."""
     from tqdm import tqdm
@@ -104,18 +105,21 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> N
         for store in stores:
             store.close()
         backend.close(cancel=interrupted)
-        loading.join()
+    return loading
 
 
 def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panels: Optional[dict], out: Path,
                   quantile: float = analysis.DEFAULT_ZONE_QUANTILE, damping: str = analysis.DEFAULT_DAMPING,
-                  jobs: int = 1, timings: Optional[dict] = None) -> dict:
+                  jobs: int = 1, timings: Optional[dict] = None, warming: Optional[threading.Thread] = None) -> dict:
     """Write every sweep's results (:func:`finish`) and their figures, drawn in ``jobs`` processes;
     with ``panels`` (a preset set: letter -> sweep name), the paper's Figs. 4-9 and a combined
     ``zones.json`` in ``out`` instead of each sweep's contours. Returns the results by name;
     ``timings``, if given, receives the seconds spent building the datasets and until every file
-    and figure is written (the figures are drawn in forked processes while the files are written)."""
+    and figure is written (the figures are drawn in forked processes while the files are written).
+    ``warming`` is :func:`execute`'s warm-up of the writers, joined first."""
     begin = time.perf_counter()
+    if warming is not None:
+        warming.join()
     results = {name: finish(model, run, quantile, damping) for name, run in zip(names, runs)}
     if panels:
         calls = figures.paper_figure_calls({letter: (results[name]["dataset"], results[name]["masks"],

@@ -22,7 +22,9 @@ def preload() -> threading.Thread:
     duck-array modules it probes, dask.array among them: 0.5 s), the NetCDF engine (a tiny file
     written), scipy.ndimage and matplotlib (fonts, mathtext). About 1.5 s of imports that the main
     process, which only waits on its workers during a sweep, would otherwise spend after the last
-    point. Join the thread before writing."""
+    point, one core idle. At normal priority: on cores the workers fill it slows them by about
+    half its CPU, which is less than it would cost after them. Join it before writing (whatever
+    is left then counts as writing)."""
     thread = threading.Thread(target=_preload, name="preload-outputs", daemon=True)
     thread.start()
     return thread
