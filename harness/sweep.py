@@ -124,7 +124,7 @@ def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panel
     if panels:
         calls = figures.paper_figure_calls({letter: (results[name]["dataset"], results[name]["masks"],
                                                      results[name]["paper_zone"]) for letter, name in panels.items()},
-                                           out)
+                                           out, figures.Sheets())
         calls += [call for result in results.values() for call in result["figures"]
                   if call[0] is figures.damping_measures_figure]
         combined = {name: results[name]["zones"] for name in panels.values()}
@@ -161,9 +161,10 @@ def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZO
         files[2].write_text(json.dumps(zones, indent=2) + "\n")
 
     paper_zone = {name: analysis.PAPER_ZONES[name] for name in ds["DI"].dims if name in analysis.PAPER_ZONES}
-    calls = figures.sweep_figure_calls(ds, masks, paper_zone or None, run.folder)
+    sheets = figures.Sheets()
+    calls = figures.sweep_figure_calls(ds, masks, paper_zone or None, run.folder, sheets)
     if damping != analysis.DEFAULT_DAMPING and len(ds["DI"].dims) == 2:
-        calls.append((figures.damping_measures_figure, ds, quantile, run.folder / "damping_measures.png"))
+        calls.append((figures.damping_measures_figure, sheets, ds, quantile, run.folder / "damping_measures.png"))
     return {"dataset": ds, "zones": zones, "masks": masks, "paper_zone": paper_zone or None, "files": files,
             "write": write, "figures": calls}
 
