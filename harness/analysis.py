@@ -137,15 +137,13 @@ def paper_zone_mask(ds) -> Optional[np.ndarray]:
 
 def top_zone(ds, metric: str, quantile: float = DEFAULT_ZONE_QUANTILE) -> tuple[np.ndarray, dict]:
     """The top-``quantile`` zone of ``metric``: its mask and a JSON-safe description."""
-    from scipy import ndimage
-
     values = ds[metric].values
     finite = np.isfinite(values)
     if not finite.any():
         return np.zeros(values.shape, bool), {"metric": metric, "points": 0}
     threshold = float(np.quantile(values[finite], quantile))
     mask = finite & (values >= threshold)
-    labels, count = ndimage.label(mask, structure=np.ones((3,) * values.ndim))
+    labels, count = connected_parts(mask)
     best = np.unravel_index(np.nanargmax(values), values.shape)
     region_mask = labels == labels[best]
     dims = ds[metric].dims
@@ -169,6 +167,32 @@ def top_zone(ds, metric: str, quantile: float = DEFAULT_ZONE_QUANTILE) -> tuple[
             index = np.nonzero(which.any(axis=tuple(j for j in range(values.ndim) if j != k)))[0]
             report[key][name] = [float(coord[index.min()]), float(coord[index.max()])]
     return mask, report
+
+
+def connected_parts(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """The connected parts of ``mask``, points touching by a face, an edge or a corner: labels
+    1..count (0 outside) and count, as ``scipy.ndimage.label`` with a full 3^n structure (whose
+    import cost a third of a second after a sweep). A walk over the masked points only."""
+    import itertools
+
+    inside = {tuple(int(i) for i in point) for point in zip(*np.nonzero(mask))}
+    steps = [step for step in itertools.product((-1, 0, 1), repeat=mask.ndim) if any(step)]
+    labels = np.zeros(mask.shape, dtype=int)
+    count = 0
+    for start in sorted(inside):  # C order, as scipy numbers its parts
+        if labels[start]:
+            continue
+        count += 1
+        labels[start] = count
+        stack = [start]
+        while stack:
+            point = stack.pop()
+            for step in steps:
+                near = tuple(p + d for p, d in zip(point, step))
+                if near in inside and not labels[near]:
+                    labels[near] = count
+                    stack.append(near)
+    return labels, count
 
 
 def zones_report(ds, quantile: float = DEFAULT_ZONE_QUANTILE) -> dict:

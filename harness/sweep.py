@@ -78,9 +78,11 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     return SweepRun(spec, folder, done, header, start_over)
 
 
-def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> threading.Thread:
+def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None,
+            warm_up: bool = True) -> Optional[threading.Thread]:
     """Run every unfinished point of ``runs`` on ``backend``, appending each record to its
-    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal."""
+    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal.
+    Returns the warm-up of the writers started meanwhile (``warm_up``), for :func:`write_results`."""
     from tqdm import tqdm
 
     todo, stores = [], []
@@ -90,7 +92,7 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> t
                     for index, values in run.todo())
     total = sum(run.spec.size for run in runs)
     finished = total - len(todo)
-    loading = preload()
+    loading = preload() if warm_up else None
     bar = tqdm(total=total, initial=finished, unit="pt", desc="sweep", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True

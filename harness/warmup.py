@@ -20,7 +20,7 @@ from .analysis import save_dataset
 def preload() -> threading.Thread:
     """Import and warm up, in a background thread, what writing results needs: xarray (with the
     duck-array modules it probes, dask.array among them: 0.5 s), the NetCDF engine (a tiny file
-    written), scipy.ndimage and matplotlib (fonts, mathtext). About 1.5 s of imports that the main
+    written) and matplotlib (fonts, mathtext). About 1.5 s of imports that the main
     process, which only waits on its workers during a sweep, would otherwise spend after the last
     point, one core idle. At normal priority: on cores the workers fill it slows them by about
     half its CPU, which is less than it would cost after them. Join it before writing (whatever
@@ -31,7 +31,6 @@ def preload() -> threading.Thread:
 
 
 def _preload() -> None:
-    import scipy.ndimage  # noqa: F401 - the zones' connected parts
     import xarray as xr
 
     with tempfile.TemporaryDirectory() as folder:

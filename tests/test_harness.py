@@ -284,3 +284,17 @@ def test_the_command_exits_with_status_2_on_bad_input(fmu, tmp_path):
                           cwd=ROOT, env=env, capture_output=True, text=True)
     assert done.returncode == 2
     assert "m = -1.0 is below its minimum 0" in done.stderr
+
+
+def test_zones_connected_parts_are_scipys_labels():
+    from scipy import ndimage
+
+    from harness.analysis import connected_parts
+
+    rng = np.random.default_rng(13)
+    for shape in [(31, 31), (7, 9, 5), (40,), (6, 5, 4, 3)]:
+        for share in (0.1, 0.3, 0.6):
+            mask = rng.random(shape) < share
+            labels, count = connected_parts(mask)
+            expected, expected_count = ndimage.label(mask, structure=np.ones((3,) * mask.ndim))
+            assert count == expected_count and np.array_equal(labels, expected), (shape, share)
