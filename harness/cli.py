@@ -12,6 +12,10 @@
                                  [--load OHM] [--voltage-model N] [--set NAME=VALUE ...] [--samples N]
                                  [--tolerance TOL] [--max-cycles N] [--newton-iterations N] [--out DIR]
                                  [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
+    piezo-fmu optimize --param NAME=LO:HI ... [--objective perfectibility|forced] [--weight TERM=W ...]
+                       [--reference TERM=VALUE ...] [--damping eq29|ls] [--maxiter N] [--popsize N] [--seed N]
+                       [--polish] [--no-grid] [--sensitivity-step F] [frequency-response's band options]
+                       [--out DIR] [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
     piezo-fmu presets
 
 Values are SI (m, kg, s, V). Bad input (an unknown parameter, an empty or reversed range, a
