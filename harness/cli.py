@@ -1,9 +1,10 @@
-"""``piezo-fmu``: the nominal case, sweeps and the two designs, all through the FMU with fmpy.
+"""``piezo-fmu``: the nominal case, sweeps, the two designs, the load, the frequency response and
+the optimiser, all through the FMU with fmpy.
 
     piezo-fmu nominal [--out DIR] [--stop-time S] [--step S] [--set NAME=VALUE ...]
     piezo-fmu sweep (--grid NAME=START:STOP:COUNT ... | --preset NAME | --config FILE.toml)
                     [--set NAME=VALUE ...] [--stop-time S] [--step S] [--out DIR] [--jobs N]
-                    [--scheduler ADDRESS | --dask-local] [--resume | --force]
+                    [--scheduler ADDRESS | --dask-local] [--resume | --force] [--damping eq29|ls]
     piezo-fmu two-designs [--out DIR] [--stop-time S] [--step S]
     piezo-fmu load-sweep [--r-min OHM] [--r-max OHM] [--count N] [--models 1,2] [--set NAME=VALUE ...]
                          [--stop-time S] [--step S] [--impact-step S] [--out DIR] [--jobs N]
