@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me clean
+.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -35,6 +35,9 @@ two-designs: $(STAMP)
 load-sweep: $(STAMP)
 	$(BIN)/piezo-fmu load-sweep
 
+frequency-response: $(STAMP)
+	$(BIN)/piezo-fmu frequency-response --force
+
 test: system-deps $(STAMP)
 	$(BIN)/python -m pytest
 
@@ -53,7 +56,7 @@ hosts: system-deps $(STAMP)
 fmu-check: $(STAMP)
 	$(BIN)/python -m piezo_fmu.fmi.build --check
 
-bench: bench-core bench-fmu bench-sweep
+bench: bench-core bench-fmu bench-sweep bench-me bench-forced
 
 bench-core: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
@@ -66,6 +69,9 @@ bench-sweep: $(STAMP)
 
 bench-me: $(STAMP)
 	$(BIN)/python benchmarks/bench_me.py
+
+bench-forced: $(STAMP)
+	$(BIN)/python benchmarks/bench_forced.py
 
 clean:
 	rm -rf $(VENV) results build

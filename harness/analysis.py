@@ -7,6 +7,11 @@ above the metric's ``quantile`` over the sweep (default 0.9, the top tenth), and
 is the bounding box of the connected part of that set holding the best point. The metrics are
 the paper's: ``DI`` gives the vibratory-based zone (Fig. 7), ``V_rms`` the energy-based zone
 (Fig. 8), perfectibility the design zone (Fig. 9).
+
+The damping measure. Eq. 29 takes the first two maxima of ``p``; an impact near a crest makes a
+double maximum and a spike. ``--damping ls`` ranks by ``DI_ls`` instead, minus the least-squares
+slope of the positive maxima that follow an impact (an FMU output): the vibratory-based zone and
+perfectibility then use it. Eq. 29 stays the default.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from typing import Optional
 
 import numpy as np
 
-from .fmu import METRIC_OUTPUTS, METRIC_UNITS, FmuModel
+from .fmu import METRIC_OUTPUTS, METRIC_UNITS, OPTIONAL_METRICS, FmuModel
 from .spec import SweepSpec
 
 #: The paper's design zones (SI): m 0.17-0.20 kg, d 8-10 mm, x1 0-25 mm (Fig. 9).
@@ -25,8 +30,20 @@ PAPER_ZONES = {"m": (0.17, 0.20), "d": (0.008, 0.010), "x1": (0.0, 0.025)}
 #: Weight factors of eq. 31 (WF1 for V_rms, WF2 for DI).
 WF1 = WF2 = 0.5
 DEFAULT_ZONE_QUANTILE = 0.9
-#: The zone of each metric, as the paper names them.
-ZONE_KINDS = {"DI": "vibratory-based", "V_rms": "energy-based", "perfectibility": "design"}
+#: The damping measures (``--damping``) and the variable each ranks by.
+DAMPING_MEASURES = {"eq29": "DI", "ls": "DI_ls"}
+DEFAULT_DAMPING = "eq29"
+
+
+def zone_kinds(ds) -> dict:
+    """The zone of each metric, as the paper names them; the vibratory-based zone is the damping
+    measure's the dataset was built with."""
+    return {damping_variable(ds): "vibratory-based", "V_rms": "energy-based", "perfectibility": "design"}
+
+
+def damping_variable(ds) -> str:
+    """``DI`` (eq. 29) or ``DI_ls``: the damping measure the dataset ranks by."""
+    return ds.attrs.get("damping_variable", "DI")
 
 
 def perfectibility(v_rms: np.ndarray, di: np.ndarray) -> np.ndarray:
@@ -37,20 +54,27 @@ def perfectibility(v_rms: np.ndarray, di: np.ndarray) -> np.ndarray:
         return 100.0 * (WF1 * v_rms / np.nanmax(v_rms) + WF2 * di / np.nanmax(di))
 
 
-def build_dataset(spec: SweepSpec, records: dict[int, dict], model: FmuModel):
-    """The sweep as an ``xarray.Dataset`` over its axes, with perfectibility; points not
-    finished or rejected by the FMU are NaN (their ``status`` says which)."""
+def build_dataset(spec: SweepSpec, records: dict[int, dict], model: FmuModel, damping: str = DEFAULT_DAMPING):
+    """The sweep as an ``xarray.Dataset`` over its axes, with perfectibility by the damping
+    measure ``damping`` (:data:`DAMPING_MEASURES`); points not finished or rejected by the FMU
+    are NaN (their ``status`` says which)."""
     import xarray as xr
 
     shape, dims = spec.shape, [axis.name for axis in spec.axes]
-    metrics = {key: np.full(shape, np.nan) for key in METRIC_OUTPUTS}
+    keys = list(METRIC_OUTPUTS) + [key for key in OPTIONAL_METRICS
+                                   if any(key in record for record in records.values())]
+    measure = DAMPING_MEASURES[damping]
+    if measure not in keys:
+        raise ValueError(f"the points carry no {measure} (an FMU older than its output "
+                         f"{OPTIONAL_METRICS.get(measure, measure)})")
+    metrics = {key: np.full(shape, np.nan) for key in keys}
     seconds = np.full(shape, np.nan)
     cpu_seconds = np.full(shape, np.nan)
     status = np.full(shape, "missing", dtype=object)
     error = np.full(shape, "", dtype=object)
     for index, record in records.items():
         position = np.unravel_index(index, shape)
-        for key in METRIC_OUTPUTS:
+        for key in keys:
             value = record.get(key)
             metrics[key][position] = np.nan if value is None else value
         seconds[position] = record.get("seconds", np.nan)
@@ -63,13 +87,17 @@ def build_dataset(spec: SweepSpec, records: dict[int, dict], model: FmuModel):
         parameter = model.parameters[axis.name]
         coords[axis.name] = (axis.name, np.asarray(axis.values),
                              {"units": parameter.unit or "1", "long_name": parameter.description})
-    data = {key: (dims, values, {"units": METRIC_UNITS[key], "fmu_output": METRIC_OUTPUTS[key]})
+    outputs = {**METRIC_OUTPUTS, **OPTIONAL_METRICS}
+    data = {key: (dims, values, {"units": METRIC_UNITS[key], "fmu_output": outputs[key]})
             for key, values in metrics.items()}
     data["DI"][2]["long_name"] = "damping inclination (eq. 29)"
+    if "DI_ls" in data:
+        data["DI_ls"][2]["long_name"] = "robust damping inclination: least-squares decay slope of the maxima"
     data["V_rms"][2]["long_name"] = "RMS of the impact voltages (eq. 30)"
     data["P_ave"][2]["long_name"] = "average power V_rms^2 / R_load (eq. 30)"
-    data["perfectibility"] = (dims, perfectibility(metrics["V_rms"], metrics["DI"]),
-                              {"units": "%", "long_name": f"perfectibility (eq. 31, WF1 = {WF1}, WF2 = {WF2})"})
+    data["perfectibility"] = (dims, perfectibility(metrics["V_rms"], metrics[measure]),
+                              {"units": "%", "long_name": f"perfectibility (eq. 31, WF1 = {WF1}, WF2 = {WF2}, "
+                                                          f"damping measure {measure})"})
     data["status"] = (dims, status.astype(str), {"long_name": "ok, error (the FMU rejected the point) or missing"})
     data["error"] = (dims, error.astype(str), {"long_name": "the FMU's message for a rejected point"})
     data["seconds"] = (dims, seconds, {"units": "s", "long_name": "wall time of the point in its worker"})
@@ -86,6 +114,7 @@ def build_dataset(spec: SweepSpec, records: dict[int, dict], model: FmuModel):
         "fmu": str(model.path),
         "fmu_guid": model.guid,
         "units": "SI (DI in m/s; multiply by 100 for the paper's cm/s)",
+        "damping_variable": measure,
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
@@ -108,21 +137,19 @@ def paper_zone_mask(ds) -> Optional[np.ndarray]:
 
 def top_zone(ds, metric: str, quantile: float = DEFAULT_ZONE_QUANTILE) -> tuple[np.ndarray, dict]:
     """The top-``quantile`` zone of ``metric``: its mask and a JSON-safe description."""
-    from scipy import ndimage
-
     values = ds[metric].values
     finite = np.isfinite(values)
     if not finite.any():
         return np.zeros(values.shape, bool), {"metric": metric, "points": 0}
     threshold = float(np.quantile(values[finite], quantile))
     mask = finite & (values >= threshold)
-    labels, count = ndimage.label(mask, structure=np.ones((3,) * values.ndim))
+    labels, count = connected_parts(mask)
     best = np.unravel_index(np.nanargmax(values), values.shape)
     region_mask = labels == labels[best]
     dims = ds[metric].dims
     report = {
         "metric": metric,
-        "kind": ZONE_KINDS.get(metric, ""),
+        "kind": zone_kinds(ds).get(metric, ""),
         "quantile": quantile,
         "threshold": threshold,
         "units": ds[metric].attrs.get("units", ""),
@@ -142,12 +169,38 @@ def top_zone(ds, metric: str, quantile: float = DEFAULT_ZONE_QUANTILE) -> tuple[
     return mask, report
 
 
+def connected_parts(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """The connected parts of ``mask``, points touching by a face, an edge or a corner: labels
+    1..count (0 outside) and count, as ``scipy.ndimage.label`` with a full 3^n structure (whose
+    import cost a third of a second after a sweep). A walk over the masked points only."""
+    import itertools
+
+    inside = {tuple(int(i) for i in point) for point in zip(*np.nonzero(mask))}
+    steps = [step for step in itertools.product((-1, 0, 1), repeat=mask.ndim) if any(step)]
+    labels = np.zeros(mask.shape, dtype=int)
+    count = 0
+    for start in sorted(inside):  # C order, as scipy numbers its parts
+        if labels[start]:
+            continue
+        count += 1
+        labels[start] = count
+        stack = [start]
+        while stack:
+            point = stack.pop()
+            for step in steps:
+                near = tuple(p + d for p, d in zip(point, step))
+                if near in inside and not labels[near]:
+                    labels[near] = count
+                    stack.append(near)
+    return labels, count
+
+
 def zones_report(ds, quantile: float = DEFAULT_ZONE_QUANTILE) -> dict:
     """Our zones (DI, V_rms, perfectibility) and how the paper's design zone fares in this sweep."""
     report = {"sweep": ds.attrs.get("sweep"), "stop_time_s": ds.attrs.get("stop_time_s"),
-              "zones": {}, "paper": None}
+              "damping_measure": damping_variable(ds), "zones": {}, "paper": None}
     masks = {}
-    for metric in ZONE_KINDS:
+    for metric in zone_kinds(ds):
         masks[metric], report["zones"][metric] = top_zone(ds, metric, quantile)
     paper = paper_zone_mask(ds)
     if paper is not None:
@@ -181,7 +234,9 @@ def tidy_frame(ds, quantile: float = DEFAULT_ZONE_QUANTILE):
     whether the point lies in the paper's design zone and in ours."""
     frame = ds.to_dataframe().reset_index()
     frame.insert(0, "index", np.arange(len(frame)))
-    frame.insert(frame.columns.get_loc("DI") + 1, "DI_cm_per_s", 100.0 * frame["DI"])
+    for key in ("DI", "DI_ls"):
+        if key in frame:
+            frame.insert(frame.columns.get_loc(key) + 1, f"{key}_cm_per_s", 100.0 * frame[key])
     paper = paper_zone_mask(ds)
     if paper is not None:
         frame["in_paper_design_zone"] = paper.reshape(-1)
@@ -231,3 +286,15 @@ def zone_summary_lines(report: dict, show) -> list[str]:
 
 def _fmt(value: Optional[float]) -> str:
     return "n/a" if value is None else f"{value:.1f}"
+
+
+def bands(ratios, mask) -> list[list[float]]:
+    """Runs of consecutive ``True`` in ``mask`` as ``[first ratio, last ratio]``."""
+    runs, start = [], None
+    for k, inside in enumerate(list(mask) + [False]):
+        if inside and start is None:
+            start = k
+        elif not inside and start is not None:
+            runs.append([float(ratios[start]), float(ratios[k - 1])])
+            start = None
+    return runs

@@ -10,6 +10,14 @@ come back in the order they finish, as JSON-safe records.
   locally. The FMU travels to the workers as bytes (scattered once), so remote workers need
   only this package and fmpy installed, not the file.
 - :class:`InProcess`: one after another on one instance in this process (``--jobs 1``).
+
+Besides sweep points, every backend runs *tasks* (:meth:`ProcessPool.run_tasks`): a task is
+``(tag, function, args)``, run as ``function(instance, *args)`` on a worker's instance, where
+``function`` is a module-level function (it travels by name) returning a JSON-safe result. A
+task's result may call for more tasks (``follow``), submitted before the result is handed on, so
+that dependent work, such as the next frequency of a frequency sweep, keeps the workers busy.
+The optimiser's evaluations are tasks too (the ``workers`` map of
+``scipy.optimize.differential_evolution``).
 """
 
 from __future__ import annotations
@@ -24,7 +32,8 @@ import signal
 import tempfile
 import threading
 from pathlib import Path
-from typing import Iterable, Iterator, Optional
+from collections import deque
+from typing import Callable, Iterable, Iterator, Optional
 
 from .fmu import FmuModel, Instance
 
@@ -63,6 +72,16 @@ def _run_chunk_in_worker(items: list[tuple]) -> list[dict]:
     return [_WORKER.run_point(*item) for item in items]
 
 
+def _run_task_in_worker(function: Callable, args: tuple):
+    return function(_WORKER, *args)
+
+
+#: A task: ``(tag, function, args)``, run as ``function(instance, *args)``.
+Task = tuple
+#: What follows a finished task: ``follow(tag, result)`` returns the tasks it calls for.
+Follow = Optional[Callable[[object, object], Iterable[Task]]]
+
+
 def _chunks(items: list, jobs: int) -> list[list]:
     """``items`` in tasks of a few points: enough tasks to keep every worker busy to the end
     (about 16 per worker), few enough that a task's round trip is small beside its work."""
@@ -81,6 +100,16 @@ class InProcess:
     def run(self, todo: Iterable[tuple]) -> Iterator[tuple]:
         for tag, index, values, stop_time, step in todo:
             yield tag, self.instance.run_point(index, values, stop_time, step)
+
+    def run_tasks(self, tasks: Iterable[Task], follow: Follow = None) -> Iterator[tuple]:
+        """Run tasks in order, and the tasks their results call for; yield ``(tag, result)``."""
+        queue = deque(tasks)
+        while queue:
+            tag, function, args = queue.popleft()
+            result = function(self.instance, *args)
+            if follow is not None:
+                queue.extend(follow(tag, result))
+            yield tag, result
 
     def close(self, cancel: bool = False) -> None:
         pass
@@ -129,6 +158,42 @@ class ProcessPool:
                 self._executor.shutdown(wait=False, cancel_futures=True)
                 self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
 
+    def run_tasks(self, tasks: Iterable[Task], follow: Follow = None) -> Iterator[tuple]:
+        """Run tasks, and the tasks their results call for (``follow``, submitted before the
+        result is yielded); yield ``(tag, result)`` as each finishes, each exactly once, across
+        worker deaths (as :meth:`run`)."""
+        pending: dict = {}
+
+        def submit(task: Task) -> None:
+            pending[self._executor.submit(_run_task_in_worker, task[1], task[2])] = task
+
+        for task in tasks:
+            submit(task)
+        while pending:
+            done, _ = concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+            lost = []
+            for future in done:
+                task = pending.pop(future)
+                if isinstance(future.exception(), concurrent.futures.process.BrokenProcessPool):
+                    lost.append(task)
+                    continue
+                result = future.result()
+                if follow is not None:
+                    for more in follow(task[0], result):
+                        submit(more)
+                yield task[0], result
+            if lost:
+                if self.restarts >= self.MAX_RESTARTS:
+                    raise concurrent.futures.process.BrokenProcessPool("worker processes died repeatedly")
+                self.restarts += 1
+                # Every task in flight is lost with the pool: run them again in a new one.
+                lost += list(pending.values())
+                pending.clear()
+                self._executor.shutdown(wait=False, cancel_futures=True)
+                self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
+                for task in lost:
+                    submit(task)
+
     @staticmethod
     def _finished(records: list[dict], chunk: list[tuple], remaining: dict) -> Iterator[tuple]:
         for key, record in zip(chunk, records):
@@ -174,6 +239,10 @@ def _run_on_dask(fmu_bytes: bytes, guid: str, index: int, values: dict, stop_tim
     return _dask_instance(fmu_bytes, guid).run_point(index, values, stop_time, step)
 
 
+def _task_on_dask(fmu_bytes: bytes, guid: str, function: Callable, args: tuple):
+    return function(_dask_instance(fmu_bytes, guid), *args)
+
+
 class DaskCluster:
     """Points run on a ``distributed`` cluster: ``scheduler`` is its address, or ``None`` to
     start a local cluster of ``jobs`` single-threaded worker processes."""
@@ -210,6 +279,27 @@ class DaskCluster:
             self._futures.append(future)
         for future in as_completed(self._futures):
             yield tags[future.key], future.result()
+
+    def run_tasks(self, tasks: Iterable[Task], follow: Follow = None) -> Iterator[tuple]:
+        """Run tasks, and the tasks their results call for; yield ``(tag, result)`` as each
+        finishes."""
+        from distributed import as_completed
+
+        tags = {}
+
+        def submit(task: Task):
+            future = self._client.submit(_task_on_dask, self._fmu, self._guid, task[1], task[2], pure=False)
+            tags[future.key] = task[0]
+            self._futures.append(future)
+            return future
+
+        running = as_completed([submit(task) for task in tasks])
+        for future in running:
+            result = future.result()
+            if follow is not None:
+                for more in follow(tags[future.key], result):
+                    running.add(submit(more))
+            yield tags[future.key], result
 
     def close(self, cancel: bool = False) -> None:
         if cancel and self._futures:

@@ -43,11 +43,14 @@ METRIC_OUTPUTS = {
 }
 METRIC_UNITS = {
     "impact_count": "1", "DI": "m/s", "V_rms": "V", "P_ave": "W", "last_impact_voltage": "V",
-    "energy_dissipated": "J", "energy_balance_error": "J",
+    "energy_dissipated": "J", "energy_balance_error": "J", "DI_ls": "m/s",
 }
 #: End-of-run outputs (J) a point's record also carries when the FMU declares them: the energy
 #: harvested in the loads (voltage_model 1 and 2), in total and per barrier.
 ENERGY_OUTPUTS = ("harvested_energy", "harvested_energy_left", "harvested_energy_right")
+#: Metrics a point's record also carries when the FMU declares them (FMUs built before issue 13
+#: lack them), under the harness's names: the robust damping inclination DI_ls (m/s).
+OPTIONAL_METRICS = {"DI_ls": "damping_inclination_ls"}
 
 
 class FmuRunError(RuntimeError):
@@ -122,6 +125,8 @@ class FmuModel:
         self.model_identifier = self.model_description.coSimulation.modelIdentifier
         self.parameters: dict[str, Parameter] = {}
         self.outputs: dict[str, tuple[str, int]] = {}
+        #: Inputs (Real), by name: their value references.
+        self.inputs: dict[str, int] = {}
         #: Calculated parameters (fixed after initialization), as ``(type, valueReference)``.
         self.calculated: dict[str, tuple[str, int]] = {}
         for variable in self.model_description.modelVariables:
@@ -133,6 +138,8 @@ class FmuModel:
                     description=variable.description or "")
             elif variable.causality == "output":
                 self.outputs[variable.name] = (variable.type, variable.valueReference)
+            elif variable.causality == "input":
+                self.inputs[variable.name] = variable.valueReference
             elif variable.causality == "calculatedParameter":
                 self.calculated[variable.name] = (variable.type, variable.valueReference)
         missing = [name for name in METRIC_OUTPUTS.values() if name not in self.outputs]
@@ -182,7 +189,8 @@ class Instance:
                              modelIdentifier=model.model_identifier, instanceName=instance_name)
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
         self._fresh = True
-        outputs = {**METRIC_OUTPUTS, **{name: name for name in ENERGY_OUTPUTS if name in model.outputs}}
+        outputs = {**METRIC_OUTPUTS, **{key: name for key, name in OPTIONAL_METRICS.items() if name in model.outputs},
+                   **{name: name for name in ENERGY_OUTPUTS if name in model.outputs}}
         self._metric_refs = {
             kind: [(key, self.model.outputs[name][1]) for key, name in outputs.items()
                    if self.model.outputs[name][0] == kind]
@@ -200,9 +208,12 @@ class Instance:
         self._fresh = False
         self.messages.clear()
 
-    def start(self, values: dict) -> None:
-        """Reset the instance (unless fresh), set ``values`` (SI) and initialize at t = 0."""
+    def start(self, values: dict, inputs: Optional[dict] = None) -> None:
+        """Reset the instance (unless fresh), set ``values`` (SI) and the ``inputs`` at t = 0
+        (by name; the FMU takes them as the initial state of the base), and initialize at t = 0."""
         self.renew()
+        if inputs:
+            self.fmu.setReal([self.model.inputs[name] for name in inputs], [float(v) for v in inputs.values()])
         reals, integers = ([], []), ([], [])
         for name, value in values.items():
             parameter = self.model.parameters[name]
@@ -219,7 +230,7 @@ class Instance:
 
     def metrics(self) -> dict:
         """The metric outputs now, under the harness's names (see :data:`METRIC_OUTPUTS`), and
-        the :data:`ENERGY_OUTPUTS` the FMU declares."""
+        the :data:`OPTIONAL_METRICS` and :data:`ENERGY_OUTPUTS` the FMU declares."""
         result = {}
         for kind, getter in (("Real", self.fmu.getReal), ("Integer", self.fmu.getInteger)):
             refs = self._metric_refs[kind]

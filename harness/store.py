@@ -12,15 +12,17 @@ import json
 import os
 from pathlib import Path
 
+from .spec import UsageError, prepare_output_dir
+
 SPEC_FILE = "sweep.json"
 POINTS_FILE = "points.jsonl"
 
 
 class PointStore:
-    """The ``points.jsonl`` of one sweep folder."""
+    """The ``points.jsonl`` (or another ``name``) of one results folder."""
 
-    def __init__(self, folder: Path):
-        self.path = Path(folder) / POINTS_FILE
+    def __init__(self, folder: Path, name: str = POINTS_FILE):
+        self.path = Path(folder) / name
         self._handle = None
 
     def load(self) -> dict[int, dict]:
@@ -65,3 +67,45 @@ class PointStore:
     def clear(self) -> None:
         if self.path.exists():
             self.path.unlink()
+
+
+def open_folder(folder: Path, header_file: str, header: dict, same: tuple, resume: bool, force: bool,
+                option: str = "--out", what: str = "run", points_file: str = POINTS_FILE
+                ) -> tuple[Path, dict[int, dict], bool]:
+    """Check a results folder for the run ``header`` describes and read what it holds; change
+    nothing. Returns ``(folder, finished records by index, start_over)``.
+
+    Without ``resume`` a folder that already holds finished points is refused unless ``force``
+    (which starts over); with ``resume`` its ``header_file`` must agree with ``header`` on the
+    keys ``same`` and on the FMU's GUID. ``what`` names the run in messages. Raises
+    :class:`UsageError` naming the option.
+    """
+    folder = prepare_output_dir(folder, option)
+    path = folder / header_file
+    store = PointStore(folder, points_file)
+    done: dict = {}
+    start_over = force
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            old = None
+        if resume:
+            if old is None:
+                raise UsageError(f"--resume: {path} cannot be read; use --force to start over")
+            if json.dumps({k: old.get(k) for k in same}, sort_keys=True) \
+                    != json.dumps({k: header.get(k) for k in same}, sort_keys=True):
+                raise UsageError(f"--resume: {folder} holds a different {what} (its {header_file} differs in "
+                                 f"{', '.join(k for k in same if old.get(k) != header.get(k))}); use the same "
+                                 "arguments, or --force to start over")
+            if old.get("fmu_guid") != header.get("fmu_guid"):
+                raise UsageError(f"--resume: {folder} was run with another FMU (GUID {old.get('fmu_guid')}, "
+                                 f"now {header.get('fmu_guid')}); use --force to start over")
+            done = store.load()
+        elif not force and store.path.is_file() and store.path.stat().st_size > 0:
+            count = len(store.load())
+            raise UsageError(f"{option} {folder} already holds a {what} ({count} of its points finished); "
+                             "pass --resume to finish it, --force to start over, or choose another folder")
+    else:
+        start_over = True  # points without a header belong to no known run
+    return folder, done, start_over

@@ -7,7 +7,9 @@ A sweep folder ``OUT`` ends up with:
 - ``sweep.nc``: the xarray Dataset (metrics over the axes, perfectibility, status);
 - ``sweep.csv``: the same as a tidy table, one row per point;
 - ``zones.json``: our vibratory, energy and design zones and how the paper's zone fares;
-- ``DI.png``, ``V_rms.png``, ``P_ave.png``, ``perfectibility.png``: contours with the zones.
+- ``DI.png`` (``DI_ls.png`` with ``--damping ls``, and ``damping_measures.png``, the two side by
+  side), ``V_rms.png``, ``P_ave.png``, ``perfectibility.png``: contours with the zones. A preset
+  set draws the paper's Figs. 4-9 instead, whose panels are the same contours.
 
 Several sweeps (a preset set) share one backend, so its workers start once and stay busy.
 """
@@ -16,14 +18,17 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
 from . import analysis, figures
 from .fmu import FmuModel
-from .spec import SweepSpec, UsageError, prepare_output_dir
-from .store import SPEC_FILE, PointStore
+from .spec import SweepSpec, UsageError
+from .store import SPEC_FILE, PointStore, open_folder
+from .warmup import preload
 
 
 @dataclass
@@ -60,35 +65,10 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     Without ``resume`` a folder that already holds finished points is refused unless ``force``
     (which starts over); with ``resume`` it must hold this same sweep of this same FMU.
     """
-    folder = prepare_output_dir(folder, option)
-    spec_path = folder / SPEC_FILE
-    store = PointStore(folder)
     header = {**spec.to_dict(), "fmu": str(model.path), "fmu_guid": model.guid}
-    done: dict = {}
-    start_over = force
-    if spec_path.is_file():
-        try:
-            old = json.loads(spec_path.read_text())
-        except (OSError, ValueError):
-            old = None
-        if resume:
-            if old is None:
-                raise UsageError(f"--resume: {spec_path} cannot be read; use --force to start over")
-            same = (json.dumps({k: old.get(k) for k in ("axes", "fixed", "stop_time", "step")}, sort_keys=True)
-                    == spec.fingerprint())
-            if not same:
-                raise UsageError(f"--resume: {folder} holds a different sweep (its {SPEC_FILE} has other axes, "
-                                 "fixed values, duration or step); use the same arguments, or --force to start over")
-            if old.get("fmu_guid") != model.guid:
-                raise UsageError(f"--resume: {folder} was run with another FMU (GUID {old.get('fmu_guid')}, "
-                                 f"now {model.guid}); use --force to start over")
-            done = store.load()
-        elif not force and store.path.is_file() and store.path.stat().st_size > 0:
-            count = len(store.load())
-            raise UsageError(f"{option} {folder} already holds a sweep ({count} of its points finished); "
-                             "pass --resume to finish it, --force to start over, or choose another folder")
-    else:
-        start_over = True  # points without a sweep.json belong to no known sweep
+    folder, done, start_over = open_folder(folder, SPEC_FILE, header, ("axes", "fixed", "stop_time", "step"),
+                                           resume, force, option, "sweep")
+    store = PointStore(folder)
     expected = dict(spec.points())
     for index, record in done.items():
         point = expected.get(index)
@@ -98,9 +78,11 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     return SweepRun(spec, folder, done, header, start_over)
 
 
-def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> None:
+def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None,
+            warm_up: bool = True) -> Optional[threading.Thread]:
     """Run every unfinished point of ``runs`` on ``backend``, appending each record to its
-    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal."""
+    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal.
+    Returns the warm-up of the writers started meanwhile (``warm_up``), for :func:`write_results`."""
     from tqdm import tqdm
 
     todo, stores = [], []
@@ -110,6 +92,7 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> N
                     for index, values in run.todo())
     total = sum(run.spec.size for run in runs)
     finished = total - len(todo)
+    loading = preload() if warm_up else None
     bar = tqdm(total=total, initial=finished, unit="pt", desc="sweep", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True
@@ -124,22 +107,68 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> N
         for store in stores:
             store.close()
         backend.close(cancel=interrupted)
+    return loading
 
 
-def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZONE_QUANTILE) -> dict:
-    """Write the Dataset, the tidy CSV, the zones and the figures of one finished sweep; return
-    ``{"dataset", "zones", "masks", "files"}``."""
-    ds = analysis.build_dataset(run.spec, run.done, model)
+def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panels: Optional[dict], out: Path,
+                  quantile: float = analysis.DEFAULT_ZONE_QUANTILE, damping: str = analysis.DEFAULT_DAMPING,
+                  jobs: int = 1, timings: Optional[dict] = None, warming: Optional[threading.Thread] = None) -> dict:
+    """Write every sweep's results (:func:`finish`) and their figures, drawn in ``jobs`` processes;
+    with ``panels`` (a preset set: letter -> sweep name), the paper's Figs. 4-9 and a combined
+    ``zones.json`` in ``out`` instead of each sweep's contours. Returns the results by name;
+    ``timings``, if given, receives the seconds spent building the datasets and until every file
+    and figure is written (the figures are drawn in forked processes while the files are written).
+    ``warming`` is :func:`execute`'s warm-up of the writers, joined first."""
+    begin = time.perf_counter()
+    if warming is not None:
+        warming.join()
+    results = {name: finish(model, run, quantile, damping) for name, run in zip(names, runs)}
+    if panels:
+        calls = figures.paper_figure_calls({letter: (results[name]["dataset"], results[name]["masks"],
+                                                     results[name]["paper_zone"]) for letter, name in panels.items()},
+                                           out, figures.Sheets())
+        calls += [call for result in results.values() for call in result["figures"]
+                  if call[0] is figures.damping_measures_figure]
+        combined = {name: results[name]["zones"] for name in panels.values()}
+        (Path(out) / "zones.json").write_text(json.dumps(combined, indent=2) + "\n")
+    else:
+        calls = [call for result in results.values() for call in result["figures"]]
+    built = time.perf_counter()
+    rendering = figures.Rendering(calls, jobs)
+    for result in results.values():
+        result["write"]()
+    written = time.perf_counter()
+    rendering.wait()
+    if timings is not None:
+        timings.update(datasets_s=built - begin, files_s=written - built, figures_s=time.perf_counter() - built,
+                       figures=len(calls))
+    return results
+
+
+def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZONE_QUANTILE,
+           damping: str = analysis.DEFAULT_DAMPING) -> dict:
+    """The results of one finished sweep, not yet written: ``{"dataset", "zones", "masks",
+    "paper_zone", "files", "figures"}``. ``files`` are written by ``write`` (a function of no
+    argument, under the key ``write``); ``figures`` are the calls that draw the contours (and
+    Eq. 29's DI beside DI_ls when the sweep ranks by DI_ls), for :class:`harness.figures.Rendering`."""
+    ds = analysis.build_dataset(run.spec, run.done, model, damping)
     zones = analysis.zones_report(ds, quantile)
-    masks = {metric: analysis.top_zone(ds, metric, quantile)[0] for metric in analysis.ZONE_KINDS}
+    masks = {metric: analysis.top_zone(ds, metric, quantile)[0] for metric in analysis.zone_kinds(ds)}
     ds.attrs["zones"] = json.dumps(zones)
     files = [run.folder / "sweep.nc", run.folder / "sweep.csv", run.folder / "zones.json"]
-    analysis.save_dataset(ds, files[0])
-    analysis.tidy_frame(ds, quantile).to_csv(files[1], index=False)
-    files[2].write_text(json.dumps(zones, indent=2) + "\n")
+
+    def write() -> None:
+        analysis.save_dataset(ds, files[0])
+        analysis.tidy_frame(ds, quantile).to_csv(files[1], index=False)
+        files[2].write_text(json.dumps(zones, indent=2) + "\n")
+
     paper_zone = {name: analysis.PAPER_ZONES[name] for name in ds["DI"].dims if name in analysis.PAPER_ZONES}
-    files += figures.sweep_figures(ds, masks, paper_zone or None, run.folder)
-    return {"dataset": ds, "zones": zones, "masks": masks, "paper_zone": paper_zone or None, "files": files}
+    sheets = figures.Sheets()
+    calls = figures.sweep_figure_calls(ds, masks, paper_zone or None, run.folder, sheets)
+    if damping != analysis.DEFAULT_DAMPING and len(ds["DI"].dims) == 2:
+        calls.append((figures.damping_measures_figure, sheets, ds, quantile, run.folder / "damping_measures.png"))
+    return {"dataset": ds, "zones": zones, "masks": masks, "paper_zone": paper_zone or None, "files": files,
+            "write": write, "figures": calls}
 
 
 def display(ds):

@@ -1,4 +1,5 @@
-"""Helpers shared by the test modules that drive the FMU or record reliability counts.
+"""Helpers shared by the test modules that drive the FMU, run the command line or record
+reliability counts.
 
 No side effects at import (unlike the test modules, which register fmpy loggers).
 """
@@ -36,3 +37,20 @@ def write_record(name: str, data) -> None:
     """Write what a reliability module counted to ``build/reliability/<name>.json``."""
     RELIABILITY_DIR.mkdir(parents=True, exist_ok=True)
     (RELIABILITY_DIR / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
+
+
+def run_cli(*argv) -> int:
+    """``piezo-fmu ARGV`` in this process; its exit status."""
+    from harness import cli
+
+    return cli.main([str(a) for a in argv])
+
+
+def assert_refused(capsys, command: str, argv, words, *more) -> None:
+    """``piezo-fmu COMMAND ARGV MORE`` exits with status 2 and an error headed by the command
+    (after the usage, for an option argparse itself refuses) that names every one of ``words``."""
+    assert run_cli(command, *argv, *more) == 2
+    message = capsys.readouterr().err
+    assert f"piezo-fmu {command}: error:" in message.splitlines()[-1], message
+    for word in words:
+        assert word in message, (word, message)

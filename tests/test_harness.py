@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -17,10 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
+from fmu_host import assert_refused, run_cli
 
 from harness import cli
 from harness.analysis import PAPER_ZONES, open_dataset, perfectibility
-from harness.fmu import FmuModel
+from harness.fmu import FmuModel, Instance
 
 ROOT = Path(__file__).resolve().parent.parent
 METRICS = {"impact_count": "impact_count", "DI": "damping_inclination", "V_rms": "voltage_rms",
@@ -38,10 +40,6 @@ def fmu(tmp_path_factory) -> Path:
     dest = tmp_path_factory.mktemp("fmu") / "PiezoImpactDamper.fmu"
     subprocess.run([sys.executable, "-m", "piezo_fmu.fmi.build", "--fmi", "2", "--dest", str(dest)], check=True, cwd=ROOT)
     return dest
-
-
-def run_cli(*argv) -> int:
-    return cli.main([str(a) for a in argv])
 
 
 def direct_fmpy(fmu: Path, stop_time: float, step: float, **values) -> dict:
@@ -121,6 +119,42 @@ def test_small_sweep_gives_the_metrics_of_single_fmpy_runs(pool_sweep, fmu):
     assert set(zones["zones"]) == {"DI", "V_rms", "perfectibility"}
     for name in ("DI.png", "V_rms.png", "P_ave.png", "perfectibility.png"):
         assert (pool_sweep / name).stat().st_size > 0
+
+
+def test_a_sweep_ranked_by_di_ls_uses_it_for_the_vibratory_zone_and_perfectibility(pool_sweep, fmu, tmp_path):
+    assert run_cli("sweep", *GRID, "--stop-time", SWEEP_STOP, "--damping", "ls", "--jobs", 2, "--out", tmp_path,
+                   "--fmu", fmu, "--no-progress") == 0
+    ds, eq29 = open_dataset(tmp_path / "sweep.nc"), open_dataset(pool_sweep / "sweep.nc")
+    assert ds.attrs["damping_variable"] == "DI_ls" and eq29.attrs["damping_variable"] == "DI"
+    for x1 in ds["x1"].values[::3]:
+        for m in ds["m"].values[::3]:
+            result = simulate_fmu(str(fmu), start_values={"x1": float(x1), "m": float(m), "d": 0.008},
+                                  stop_time=SWEEP_STOP, output_interval=1e-3, output=["damping_inclination_ls"])
+            assert float(ds["DI_ls"].sel(x1=x1, m=m)) == pytest.approx(result["damping_inclination_ls"][-1],
+                                                                       rel=1e-12, abs=1e-15)
+    assert np.array_equal(ds["perfectibility"].values, perfectibility(ds["V_rms"].values, ds["DI_ls"].values))
+    assert np.array_equal(ds["DI"].values, eq29["DI"].values)  # eq. 29 is still there, unchanged
+    zones = json.loads((tmp_path / "zones.json").read_text())
+    assert set(zones["zones"]) == {"DI_ls", "V_rms", "perfectibility"}
+    assert zones["zones"]["DI_ls"]["kind"] == "vibratory-based" and zones["damping_measure"] == "DI_ls"
+    for name in ("DI_ls.png", "damping_measures.png", "perfectibility.png"):
+        assert (tmp_path / name).stat().st_size > 0
+
+
+def test_di_ls_through_the_harness_does_not_depend_on_the_communication_step(fmu):
+    model = FmuModel(fmu)
+    unzipdir = model.extract()
+    instance = Instance(model, unzipdir)
+    try:
+        for values in ({}, {"m": 0.056}, {"d": 0.00743}):  # nominal, and two rows where eq. 29 misbehaves
+            runs = [instance.run(values, 2.0, step) for step in (2.0, 0.2, 0.013, 1e-3)]
+            assert runs[0]["DI_ls"] > 0
+            for run in runs[1:]:
+                assert run["DI_ls"] == pytest.approx(runs[0]["DI_ls"], rel=1e-12)
+                assert run["impact_count"] == runs[0]["impact_count"]
+    finally:
+        instance.free()
+        shutil.rmtree(unzipdir, ignore_errors=True)
 
 
 def test_dask_backend_gives_the_results_of_the_process_pool(pool_sweep, fmu, tmp_path):
@@ -219,14 +253,11 @@ def test_two_designs_table_puts_the_papers_numbers_beside_ours(fmu, tmp_path):
     (["--grid", "x1=0:0.075:4"], ["the FMU rejects", "x1 = 0.075", "x1 + L_p must be <= L"]),
     (["--grid", "x1=0:0.03"], ["expected NAME=START:STOP:COUNT"]),
     (["--grid", "x1=0:0.03:4", "--stop-time", "0"], ["--stop-time", "> 0"]),
+    (["--grid", "x1=0:0.03:4", "--damping", "eq31"], ["--damping", "invalid choice: 'eq31'", "'eq29', 'ls'"]),
 ])
 def test_bad_sweep_input_is_refused_with_exit_status_2(fmu, tmp_path, capsys, argv, words):
     out = tmp_path / "out"
-    assert run_cli("sweep", *argv, "--out", out, "--fmu", fmu, "--no-progress") == 2
-    message = capsys.readouterr().err
-    assert message.startswith("piezo-fmu sweep: error:")
-    for word in words:
-        assert word in message, (word, message)
+    assert_refused(capsys, "sweep", argv, words, "--out", out, "--fmu", fmu, "--no-progress")
     assert not (out / "points.jsonl").exists()
 
 
@@ -253,3 +284,17 @@ def test_the_command_exits_with_status_2_on_bad_input(fmu, tmp_path):
                           cwd=ROOT, env=env, capture_output=True, text=True)
     assert done.returncode == 2
     assert "m = -1.0 is below its minimum 0" in done.stderr
+
+
+def test_zones_connected_parts_are_scipys_labels():
+    from scipy import ndimage
+
+    from harness.analysis import connected_parts
+
+    rng = np.random.default_rng(13)
+    for shape in [(31, 31), (7, 9, 5), (40,), (6, 5, 4, 3)]:
+        for share in (0.1, 0.3, 0.6):
+            mask = rng.random(shape) < share
+            labels, count = connected_parts(mask)
+            expected, expected_count = ndimage.label(mask, structure=np.ones((3,) * mask.ndim))
+            assert count == expected_count and np.array_equal(labels, expected), (shape, share)

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
+from fmu_host import assert_refused, run_cli
 
-from harness import cli
 from harness.fmu import FmuModel
 from harness.load import find_optimum
 
@@ -25,10 +25,6 @@ STOP = 0.3
 #: 1e5 .. 1e8 Ohm, five loads: brackets the optimum (about 3 MOhm) with two loads on each side.
 BRACKET = ["--r-min", 1e5, "--r-max", 1e8, "--count", 5]
 ENERGIES = ("harvested_energy", "harvested_energy_left", "harvested_energy_right", "impact_count")
-
-
-def run_cli(*argv) -> int:
-    return cli.main([str(a) for a in argv])
 
 
 def read_csv(path: Path) -> np.ndarray:
@@ -199,11 +195,7 @@ def test_the_single_impact_peak_is_the_fmus_own_impact_voltage(tmp_path):
 ])
 def test_bad_input_is_refused_with_exit_status_2(tmp_path, capsys, command, argv, words):
     out = tmp_path / "out"
-    assert run_cli(command, *argv, "--out", out, "--fmu", FMU) == 2
-    message = capsys.readouterr().err
-    assert message.startswith(f"piezo-fmu {command}: error:"), message
-    for word in words:
-        assert word in message, (word, message)
+    assert_refused(capsys, command, argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "load_sweep.json").exists() and not (out / "impact.json").exists()
 
 

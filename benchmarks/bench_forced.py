@@ -1,0 +1,148 @@
+"""The forced response and the optimiser, timed (issue 13), beside the free-decay sweep, in one run.
+
+    python benchmarks/bench_forced.py [--jobs N] [--out DIR]
+
+1. The default frequency response: 61 frequencies from 0.5 to 2 sqrt(K/M), Y = 1 mm, with and
+   without the damper, up and down (244 points, each a verified steady state), on the process pool
+   of ``--jobs`` workers, worker start-up included; then its files and figures, timed apart.
+2. The free-decay sweep of the Figs. 4-9 preset (1922 points of 2 s) on the same pool: the
+   points per second of each.
+3. One optimisation with the defaults of ``piezo-fmu optimize``: the paper's perfectibility over
+   ``m`` (0.02 to 0.2 kg) and ``d`` (3 to 10 mm), differential evolution (15 x 2 designs a
+   generation, at most 30 generations) on the same pool, then the grid of the same budget and the
+   sensitivity: its evaluations and wall time.
+
+Wall and CPU times (the CPU time of the workers, each timing its own points). The load average
+before the run is printed: other programs on the cores slow the wall times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))  # the harness package, when not installed
+
+from harness import cli  # noqa: E402
+from harness import frequency_response as fr  # noqa: E402
+from harness.engine import ProcessPool, default_jobs  # noqa: E402
+from harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from harness.sweep import execute, open_sweep  # noqa: E402
+
+
+def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
+    args = cli._parser().parse_args(["frequency-response", "--out", str(out), "--force"])
+    unzipdir = model.extract()
+    instance = Instance(model, unzipdir)
+    try:
+        spec = cli._frequency_spec(args, model, instance)
+    finally:
+        instance.free()
+    run = fr.open_frequency_run(model, spec, out, resume=False, force=True)
+    run.begin()
+    begin = time.perf_counter()
+    warming = fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
+    simulation_s = time.perf_counter() - begin
+    begin = time.perf_counter()
+    result = fr.finish(model, run, jobs, warming)
+    outputs_s = time.perf_counter() - begin
+    shutil.rmtree(unzipdir, ignore_errors=True)
+    records = list(run.done.values())
+    chains = {}
+    for chain, (damper, direction) in enumerate(fr.CHAINS):
+        mine = [r for r in records if r["index"] // len(spec.ratios) == chain]
+        chains[f"{damper}, {direction}"] = {"cpu_s": sum(r["cpu_seconds"] for r in mine),
+                                           "not_settled": sum(not r["settled"] for r in mine)}
+    return {"points": len(records), "wall_s": simulation_s, "points_per_s": len(records) / simulation_s,
+            "worker_cpu_s": sum(r["cpu_seconds"] for r in records), "outputs_s": outputs_s,
+            "point_cpu_s_median": statistics.median(r["cpu_seconds"] for r in records),
+            "cycles_median": statistics.median(r.get("cycles") or 0 for r in records),
+            "chains": chains, "summary": result["summary"]}
+
+
+def free_decay(model: FmuModel, out: Path, jobs: int) -> dict:
+    args = cli._parser().parse_args(["sweep", "--preset", "figs4-9", "--out", str(out)])
+    sweeps, _, _ = cli._sweep_specs(args, model)
+    runs = [open_sweep(model, spec, folder, resume=False, force=True) for _, spec, folder in sweeps]
+    for run in runs:
+        run.begin()
+    unzipdir = model.extract()
+    begin = time.perf_counter()
+    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False).join()
+    wall = time.perf_counter() - begin
+    shutil.rmtree(unzipdir, ignore_errors=True)
+    records = [r for run in runs for r in run.done.values()]
+    return {"points": len(records), "wall_s": wall, "points_per_s": len(records) / wall,
+            "worker_cpu_s": sum(r["cpu_seconds"] for r in records)}
+
+
+def optimisation(model: FmuModel, out: Path, jobs: int) -> dict:
+    begin = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):  # the command's report; the figures are read back below
+        status = cli.main(["optimize", "--param", "m=0.02:0.2", "--param", "d=0.003:0.01", "--jobs", str(jobs),
+                           "--out", str(out), "--force", "--no-progress", "--fmu", str(model.path)])
+    wall = time.perf_counter() - begin
+    if status != 0:
+        raise SystemExit(f"optimize failed with status {status}")
+    report = json.loads((out / "report.json").read_text())
+    return {"command_wall_s": wall, "search": report["search"], "optimum": report["optimum"]["x"],
+            "objective": report["optimum"]["objective"], "grid": {k: v for k, v in report["grid"].items()
+                                                                    if k != "best"},
+            "grid_best": report["grid"]["best"]["objective"], "report_wall_s": report["wall_s"]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes")
+    parser.add_argument("--fmu", type=Path, default=None)
+    parser.add_argument("--out", type=Path, default=None, help="keep the results here")
+    args = parser.parse_args()
+
+    model = FmuModel(args.fmu or default_fmu_path())
+    load_before = os.getloadavg()
+    scratch = None if args.out else Path(tempfile.mkdtemp(prefix="bench_forced_"))
+    out = args.out or scratch
+    try:
+        forced = frequency_response(model, out / "frequency-response", args.jobs)
+        decay = free_decay(model, out / "figs4-9", args.jobs)
+        optimum = optimisation(model, out / "optimize", args.jobs)
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+    report = {"jobs": args.jobs, "cores": os.cpu_count(), "load_average_before": [round(x, 2) for x in load_before],
+              "frequency_response": forced, "free_decay_sweep": decay, "optimisation": optimum,
+              "free_decay_points_per_forced_point": decay["points_per_s"] / forced["points_per_s"]}
+    if args.out is not None:
+        (out / "bench_forced.json").write_text(json.dumps(report, indent=2) + "\n")
+
+    print(f"{args.jobs} workers on {os.cpu_count()} cores; load average before: {report['load_average_before']}")
+    print(f"frequency response  {forced['points']} points in {forced['wall_s']:.1f} s wall = "
+          f"{forced['points_per_s']:.2f} points/s ({forced['worker_cpu_s']:.1f} s CPU in the workers; a point's median "
+          f"{forced['point_cpu_s_median']:.3f} s CPU, {forced['cycles_median']:g} forcing cycles); files and figures "
+          f"{forced['outputs_s']:.2f} s more")
+    for name, chain in forced["chains"].items():
+        print(f"  chain {name:14s} {chain['cpu_s']:6.1f} s CPU, {chain['not_settled']} points not settled")
+    print(f"free-decay sweep    {decay['points']} points in {decay['wall_s']:.1f} s wall = {decay['points_per_s']:.1f} "
+          f"points/s ({decay['worker_cpu_s']:.1f} s CPU): {report['free_decay_points_per_forced_point']:.0f} free-decay "
+          "points for the time of one steady state")
+    search = optimum["search"]
+    print(f"optimisation        perfectibility over (m, d): {search['evaluations']} evaluations in "
+          f"{search['generations']} generations, {search['wall_s']:.1f} s wall; grid of the same budget "
+          f"{optimum['grid']['evaluations']} points; whole command (reference, search, grid, sensitivity, report) "
+          f"{optimum['command_wall_s']:.1f} s")
+    print(f"  optimum {optimum['optimum']}: J = {optimum['objective']:.4g}; grid best J = {optimum['grid_best']:.4g}")
+    print("\n".join(fr.summary_lines(forced["summary"])))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,465 @@
+"""``piezo-fmu optimize`` (issue 13): a design optimiser over FMU parameters, through the FMU.
+
+``scipy.optimize.differential_evolution`` searches chosen parameters within bounds. Its
+``workers`` map is the sweep engine (process pool, Dask or in-process), so a generation's
+evaluations run in parallel; the final polish (L-BFGS-B) goes through the same map. The objective
+``J`` is minimised; it is a weighted sum of dimensionless terms, each normalised by a stated
+reference value, the reference design's own (the FMU's start values and ``--set``, the nominal
+damper) unless given:
+
+- ``perfectibility`` (free decay, the paper's): terms ``DI`` (eq. 29, or ``DI_ls`` with
+  ``--damping ls``) and ``V_rms``, both to be large, over ``stop_time`` from the nominal release.
+  ``J = -100 (w_DI DI / DI_ref + w_V V_rms / V_ref)``: with the default weights 0.5 and 0.5,
+  ``-J`` is eq. 31's perfectibility with the maxima replaced by the reference values.
+- ``forced`` (harmonic base motion over a band, :mod:`harness.frequency_response`; one sweep up
+  with the damper): terms ``amplitude``, the peak steady-state amplitude over the band with the
+  damper over the same peak without it (to be small), ``transmissibility``, the peak amplitude over
+  ``Y`` (to be small), and ``power``, the mean harvested power over the band over the reference
+  design's (to be large). ``J = w_a amplitude + w_t transmissibility - w_p power``.
+
+A weight may be negative (it turns what its term rewards around) or zero (the term is not
+computed when that saves work).
+
+The report gives the optimum, its sensitivity (one parameter at a time, a step of a fraction of
+its range each way) and the best point of a full-factorial grid of the same budget (as many
+evaluations as the optimiser needed), so a user sees whether the optimiser earned its cost.
+
+Every evaluation is appended to ``evaluations.jsonl`` as it finishes. ``--resume`` reads them back
+as a cache: the same seed makes the optimiser propose the same points again, each found in the
+cache, so an interrupted run goes on where it stopped and loses nothing.
+
+The harness reads nothing but the FMU: it never imports the simulation core.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from .fmu import FmuRunError, Instance
+from .frequency_response import FrequencySpec, rest_state, solve_point
+from .store import PointStore, open_folder
+
+HEADER_FILE = "optimize.json"
+EVALUATIONS_FILE = "evaluations.jsonl"
+#: Each objective's terms: +1 for a term to be large (it enters J with a minus sign), -1 small.
+TERMS = {
+    "perfectibility": {"DI": 1, "V_rms": 1},
+    "forced": {"amplitude": -1, "transmissibility": -1, "power": 1},
+}
+DEFAULT_WEIGHTS = {
+    "perfectibility": {"DI": 0.5, "V_rms": 0.5},
+    # Lightly on power: the regimes that harvest most chatter with large amplitude (with 0.5, the
+    # optimum of (m, d) was such a regime, its peak 119 mm against 16 mm for the best amplitude).
+    "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.1},
+}
+#: The perfectibility's terms are in % (eq. 31).
+SCALE = {"perfectibility": 100.0, "forced": 1.0}
+#: The reference values a user may state (SI), by objective.
+REFERENCES = {"perfectibility": ("DI", "V_rms"), "forced": ("power", "amplitude_without")}
+#: The search's defaults, by objective: a forced evaluation sweeps a band, a free decay is one run.
+SEARCH_DEFAULTS = {
+    "perfectibility": {"maxiter": 30, "popsize": 15, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
+    "forced": {"maxiter": 8, "popsize": 6, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
+}
+#: The forced objective's band: w / sqrt(K/M) from 0.8 to 1.2 at 9 frequencies, at most 150 cycles
+#: each (every evaluation sweeps it); a single frequency is allowed.
+BAND_DEFAULTS = {"ratios": (0.8, 1.2), "count": 9, "max_cycles": 150, "fewest": 1}
+#: Parameters the forced objective cannot search: the shooting sets the initial state.
+STATE = ("p0", "q0", "dp0", "dq0")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """What is optimised (SI).
+
+    Attributes
+    ----------
+    names, lower, upper : tuple
+        The searched parameters and their bounds.
+    objective : str
+        ``perfectibility`` or ``forced``.
+    weights : dict
+        Weight of each term of the objective.
+    fixed : dict
+        FMU parameters held fixed (``--set``, and under ``forced`` the voltage model and load).
+    stop_time, step : float
+        Duration and communication step of a free-decay run (``perfectibility``), s.
+    damping : str
+        ``DI`` (eq. 29) or ``DI_ls``: the damping term of ``perfectibility``.
+    band : FrequencySpec or None
+        The frequencies, excitation and steady-state settings of ``forced``.
+    without_each_time : bool
+        Under ``forced``: the peak without the damper changes with the searched parameters
+        (``M``, ``K`` or ``C`` among them), so each evaluation computes it.
+    """
+
+    names: tuple
+    lower: tuple
+    upper: tuple
+    objective: str
+    weights: dict
+    fixed: dict
+    stop_time: float = 2.0
+    step: float = 0.2
+    damping: str = "DI"
+    band: Optional[FrequencySpec] = None
+    without_each_time: bool = False
+
+    def values(self, x) -> dict:
+        return {**self.fixed, **{name: float(v) for name, v in zip(self.names, x)}}
+
+    def to_dict(self) -> dict:
+        body = asdict(self)
+        body["band"] = self.band.to_dict() if self.band is not None else None
+        return body
+
+
+# -- one evaluation, in a worker -------------------------------------------------------------------
+
+def evaluate(instance: Instance, problem: Problem, x, without: bool = False) -> dict:
+    """The raw measures of the design ``x`` (a task of the sweep engine): under
+    ``perfectibility`` the free-decay metrics; under ``forced`` the peak amplitude and
+    transmissibility over the band, the mean harvested power and how many frequencies did not
+    settle, with the peak without the damper when ``without`` (or the problem says so)."""
+    begin = time.perf_counter()
+    values = problem.values(x)
+    record = {"x": [float(v) for v in x], "status": "ok", "error": None}
+    try:
+        if problem.objective == "perfectibility":
+            metrics = instance.run(values, problem.stop_time, problem.step)
+            record["measures"] = {key: metrics.get(key) for key in ("DI", "DI_ls", "V_rms", "impact_count")}
+        else:
+            record["measures"] = _band(instance, problem.band, values, with_damper=True)
+            if without or problem.without_each_time:
+                bare = _band(instance, problem.band, {**values, "d": problem.band.wide_gap}, with_damper=False)
+                record["measures"]["amplitude_without"] = bare["amplitude"]
+    except FmuRunError as error:
+        record.update(status="error", error=str(error), measures={})
+    record["seconds"] = time.perf_counter() - begin
+    return record
+
+
+def _band(instance: Instance, band: FrequencySpec, values: dict, with_damper: bool) -> dict:
+    """One sweep up the band, each frequency from the previous one's state."""
+    state, phase = rest_state(), 0.0
+    amplitudes, transmissibilities, powers, unsettled = [], [], [], 0
+    for omega in band.omegas:
+        point = solve_point(instance, 0, values, float(omega), band.base_amplitude(float(omega)), band.settings,
+                            state, phase)
+        if point["status"] != "ok":
+            raise FmuRunError(point["error"])
+        state, phase = point["state"], point["phase"]
+        amplitudes.append(point["amplitude"])
+        transmissibilities.append(point["transmissibility"])
+        powers.append(point["harvested_power"])
+        unsettled += not point["settled"]
+        if not with_damper and point["impacts_per_cycle"] > 0:
+            raise FmuRunError(f"the run without the damper (d = {values['d']:g} m) made impacts")
+    return {"amplitude": max(amplitudes), "transmissibility": max(transmissibilities),
+            "power": float(np.mean(powers)), "unsettled": unsettled}
+
+
+# -- the objective ---------------------------------------------------------------------------------
+
+def terms(problem: Problem, measures: dict, references: dict) -> dict:
+    """The dimensionless terms of a design from its raw measures."""
+    if problem.objective == "perfectibility":
+        return {"DI": measures[problem.damping] / references["DI"], "V_rms": measures["V_rms"] / references["V_rms"]}
+    without = measures.get("amplitude_without", references.get("amplitude_without"))
+    return {"amplitude": measures["amplitude"] / without if without else math.nan,
+            "transmissibility": measures["transmissibility"],
+            "power": measures["power"] / references["power"] if references.get("power") else math.nan}
+
+
+def objective_value(problem: Problem, parts: dict) -> float:
+    """``J``: the weighted terms, large-is-better ones with a minus sign (see the module)."""
+    sense = TERMS[problem.objective]
+    total = sum(-sense[name] * weight * parts[name] for name, weight in problem.weights.items() if weight != 0)
+    return SCALE[problem.objective] * total
+
+
+# -- the optimiser ---------------------------------------------------------------------------------
+
+@dataclass
+class Optimizer:
+    """Runs the search, the grid and the sensitivity on ``backend``, logging every evaluation.
+
+    ``references`` are filled by :meth:`reference` unless given; ``cache`` holds the evaluations
+    already made (from ``evaluations.jsonl`` on ``--resume``), by their parameter values."""
+
+    problem: Problem
+    backend: object
+    folder: Path
+    references: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=dict)
+    phase: str = "search"
+
+    def _key(self, x) -> tuple:
+        return (self.phase if self.phase == "reference" else "design",) + tuple(repr(float(v)) for v in x)
+
+    def records(self, xs, without: bool = False) -> list[dict]:
+        """The evaluation records of the designs ``xs``: from the cache, or run on the backend
+        (in parallel, each distinct design once) and appended to ``evaluations.jsonl`` as each
+        finishes."""
+        xs = [np.asarray(x, float) for x in xs]
+        # Each design once: a population may hold the same design twice.
+        missing = list({self._key(x): x for x in xs if self._key(x) not in self.cache}.values())
+        if missing:
+            tasks = [(k, _evaluate_task, ((self.problem, x, without),)) for k, x in enumerate(missing)]
+            with PointStore(self.folder, EVALUATIONS_FILE) as store:
+                for _, record in self.backend.run_tasks(tasks):
+                    record["phase"] = self.phase
+                    record["index"] = len(self.cache)
+                    self._score(record)
+                    self.cache[self._key(record["x"])] = record
+                    store.append(record)
+        return [self.cache[self._key(x)] for x in xs]
+
+    def _score(self, record: dict) -> None:
+        if record["status"] != "ok" or not self.references:
+            record.update(terms=None, objective=None)
+            return
+        parts = terms(self.problem, record["measures"], self.references)
+        value = objective_value(self.problem, parts)
+        # JSON has no NaN: a term without a reference (weight 0) is recorded as null.
+        record.update(terms={k: (v if math.isfinite(v) else None) for k, v in parts.items()},
+                      objective=value if math.isfinite(value) else None)
+
+    def map(self, func, xs) -> list[float]:
+        """``differential_evolution``'s ``workers``: J of every design in ``xs``. ``func`` is this
+        optimiser's :meth:`objective` (the search's own objective), evaluated here on the backend."""
+        return [value(record) for record in self.records(list(xs))]
+
+    def objective(self, x) -> float:
+        return value(self.records([x])[0])
+
+    def reference(self, x_reference) -> dict:
+        """Measure the reference design: the denominators of the terms (unless given)."""
+        self.phase = "reference"
+        record = self.records([x_reference], without=self.problem.objective == "forced")[0]
+        self.phase = "search"
+        if record["status"] != "ok":
+            raise FmuRunError(f"the reference design was rejected: {record['error']}")
+        measures = record["measures"]
+        if self.problem.objective == "perfectibility":
+            found = {"DI": measures[self.problem.damping], "V_rms": measures["V_rms"]}
+        else:
+            found = {"power": measures["power"], "amplitude_without": measures["amplitude_without"]}
+        self.references = {**found, **self.references}
+        for name, weight in self.problem.weights.items():
+            if weight != 0 and name in self.references and not self.references[name] > 0:
+                raise ValueError(f"the reference design's {name} is {self.references[name]:g}, which cannot "
+                                 f"normalise the term {name}: give --reference {name}=VALUE (> 0) or --weight "
+                                 f"{name}=0")
+        for cached in self.cache.values():
+            self._score(cached)
+        return record
+
+    def search(self, maxiter: int, popsize: int, seed: int, polish: bool, tol: float):
+        from scipy.optimize import differential_evolution
+
+        self.phase = "search"
+        bounds = list(zip(self.problem.lower, self.problem.upper))
+        return differential_evolution(self.objective, bounds, maxiter=maxiter, popsize=popsize, tol=tol, rng=seed,
+                                      polish=polish_simplex if polish else False, updating="deferred",
+                                      workers=self.map, init="latinhypercube")
+
+    def grid(self, budget: int) -> tuple[int, list[dict]]:
+        """A full-factorial grid of at most ``budget`` points over the bounds (at least 2 per axis)."""
+        self.phase = "grid"
+        per_axis = max(2, int(math.floor(budget ** (1.0 / len(self.problem.names)) + 1e-9)))
+        axes = [np.linspace(lo, hi, per_axis) for lo, hi in zip(self.problem.lower, self.problem.upper)]
+        points = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T
+        return per_axis, self.records(points)
+
+    def sensitivity(self, x, fraction: float) -> list[dict]:
+        """J one step of ``fraction`` of each range either side of ``x`` (clipped to the bounds)."""
+        self.phase = "sensitivity"
+        rows, designs = [], []
+        for i, (lo, hi) in enumerate(zip(self.problem.lower, self.problem.upper)):
+            step = fraction * (hi - lo)
+            for sign in (-1.0, 1.0):
+                shifted = np.array(x, float)
+                shifted[i] = min(hi, max(lo, shifted[i] + sign * step))
+                designs.append(shifted)
+        records = self.records(designs)
+        base = value(self.records([x])[0])
+        for i, name in enumerate(self.problem.names):
+            minus, plus = records[2 * i], records[2 * i + 1]
+            span = plus["x"][i] - minus["x"][i]
+            change = [value(r) - base for r in (minus, plus)]
+            rows.append({"name": name, "at": float(x[i]), "minus": minus["x"][i], "plus": plus["x"][i],
+                         "objective_minus": minus["objective"], "objective_plus": plus["objective"],
+                         "change_minus": _finite(change[0]), "change_plus": _finite(change[1]),
+                         "slope_per_range": _finite((value(plus) - value(minus)) / span
+                                                    * (self.problem.upper[i] - self.problem.lower[i])) if span else None})
+        return rows
+
+
+def polish_simplex(func, x0, bounds, constraints=()):
+    """The polish of the search's best design: Nelder-Mead within the bounds, in coordinates
+    scaled to the unit box (the parameters' scales differ by orders of magnitude), from a simplex
+    of 2% of each range. Derivative-free: the objective is only as smooth as its steady states
+    or free decays, and finite differences of a value exact to 1e-12 make gradients of noise.
+    Stops when the simplex spans 1e-7 of each range and 1e-11 in J."""
+    from scipy.optimize import minimize
+
+    lower, upper = np.asarray(bounds.lb, float), np.asarray(bounds.ub, float)
+    span = upper - lower
+    start = (np.asarray(x0, float) - lower) / span
+    simplex = [start] + [np.clip(start + 0.02 * np.eye(len(start))[i] * (1 if start[i] < 0.98 else -1), 0, 1)
+                         for i in range(len(start))]
+    result = minimize(lambda u: func(lower + np.clip(u, 0.0, 1.0) * span), start, method="Nelder-Mead",
+                      bounds=[(0.0, 1.0)] * len(start),
+                      options={"initial_simplex": np.array(simplex), "xatol": 1e-7, "fatol": 1e-11,
+                               "maxfev": 100 * len(start)})
+    result.x = lower + np.clip(result.x, 0.0, 1.0) * span
+    return result
+
+
+def value(record: dict) -> float:
+    """A record's J; +inf for a design the FMU rejected or whose J is undefined (null in the log)."""
+    return math.inf if record["objective"] is None else record["objective"]
+
+
+def _evaluate_task(instance: Instance, item: tuple) -> dict:
+    problem, x, without = item
+    return evaluate(instance, problem, x, without)
+
+
+def open_optimization(model, problem: Problem, references: dict, folder: Path, resume: bool, force: bool,
+                      settings: dict) -> tuple[Path, dict]:
+    """Check the folder, then commit it to this optimisation (its header written, old evaluations
+    dropped unless resuming); return ``(folder, cache of the evaluations recorded)``."""
+    header = {"problem": problem.to_dict(), "references_given": references, "search": settings,
+              "fmu": str(model.path), "fmu_guid": model.guid}
+    folder, done, start_over = open_folder(folder, HEADER_FILE, header, ("problem", "references_given", "search"),
+                                           resume, force, "--out", "optimisation", EVALUATIONS_FILE)
+    if start_over:
+        PointStore(folder, EVALUATIONS_FILE).clear()
+    (folder / HEADER_FILE).write_text(json.dumps(header, indent=2) + "\n")
+    cache = {}
+    for record in done.values():
+        key = ("reference" if record.get("phase") == "reference" else "design",) + tuple(repr(v) for v in record["x"])
+        cache[key] = record
+    return folder, cache
+
+
+def run(optimizer: Optimizer, x_reference, maxiter: int, popsize: int, seed: int, polish: bool, tol: float,
+        grid: bool, fraction: float) -> dict:
+    """The whole optimisation: reference, search, grid of the same budget, sensitivity; returns
+    the report (JSON-safe)."""
+    problem = optimizer.problem
+    begin = time.perf_counter()
+    reference = optimizer.reference(x_reference)
+    result = optimizer.search(maxiter, popsize, seed, polish, tol)
+    search_s = time.perf_counter() - begin
+    evaluations = int(result.nfev)
+    best = optimizer.records([result.x])[0]
+    report = {
+        "objective": problem.objective,
+        "weights": problem.weights,
+        "references": optimizer.references,
+        "reference_design": _design(problem, reference),
+        "optimum": _design(problem, best),
+        "search": {"evaluations": evaluations, "unique_evaluations": len({optimizer._key(r["x"]) for r in
+                                                                         optimizer.cache.values()
+                                                                         if r.get("phase") == "search"}),
+                   "generations": int(result.nit), "message": str(result.message), "wall_s": search_s,
+                   "maxiter": maxiter, "popsize": popsize, "seed": seed, "polish": polish, "tol": tol},
+    }
+    if grid:
+        per_axis, records = optimizer.grid(evaluations)
+        finite = [r for r in records if r["objective"] is not None]
+        top = min(finite, key=value) if finite else None
+        report["grid"] = {"points_per_axis": per_axis, "evaluations": len(records),
+                          "best": _design(problem, top) if top else None,
+                          "optimizer_matches_or_beats_grid": bool(top is None or value(best) <= value(top))}
+    report["sensitivity"] = {"fraction_of_range": fraction, "parameters": optimizer.sensitivity(result.x, fraction)}
+    report["wall_s"] = time.perf_counter() - begin
+    return report
+
+
+def _finite(number: float) -> Optional[float]:
+    return number if math.isfinite(number) else None
+
+
+def _design(problem: Problem, record: dict) -> dict:
+    return {"x": dict(zip(problem.names, record["x"])), "objective": record["objective"], "terms": record["terms"],
+            "measures": record["measures"]}
+
+
+# -- the report ------------------------------------------------------------------------------------
+
+def write_report(report: dict, problem: Problem, folder: Path, model) -> list[Path]:
+    """``report.json``, ``report.md``, ``evaluations.csv`` and ``convergence.png``."""
+    from . import figures
+
+    folder = Path(folder)
+    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (folder / "report.md").write_text("\n".join(report_lines(report, problem, model)) + "\n")
+    records = list(PointStore(folder, EVALUATIONS_FILE).load().values())
+    import pandas
+
+    rows = [{"index": r["index"], "phase": r["phase"], **dict(zip(problem.names, r["x"])), "objective": r["objective"],
+             **{f"term_{k}": v for k, v in (r.get("terms") or {}).items()},
+             **{f"measure_{k}": v for k, v in (r.get("measures") or {}).items()}, "status": r["status"],
+             "seconds": r["seconds"]} for r in records]
+    pandas.DataFrame(rows).to_csv(folder / "evaluations.csv", index=False)
+    figure = figures.convergence_figure(records, report, folder / "convergence.png")
+    return [folder / "report.json", folder / "report.md", folder / "evaluations.csv", figure]
+
+
+def report_lines(report: dict, problem: Problem, model) -> list[str]:
+    """The report as Markdown lines (SI units)."""
+    def show(x: dict) -> str:
+        return ", ".join(f"{name} = {value:.6g} {model.parameters[name].unit or ''}".rstrip() for name, value in x.items())
+
+    optimum, search = report["optimum"], report["search"]
+    weights = ", ".join(f"{k} {v:g}" for k, v in report["weights"].items())
+    references = ", ".join(f"{k} = {v:.6g}" for k, v in report["references"].items())
+    lines = [f"# Optimisation: {report['objective']} objective", "",
+             f"Minimised J = {_formula(problem)}; weights {weights}; references (SI) {references}.", "",
+             f"- optimum: {show(optimum['x'])}: J = {optimum['objective']:.6g}",
+             "- terms: " + ", ".join(f"{k} {_number(v)}" for k, v in (optimum["terms"] or {}).items()),
+             f"- reference design: {show(report['reference_design']['x'])}: J = "
+             f"{report['reference_design']['objective']:.6g}",
+             f"- search: {search['evaluations']} evaluations ({search['unique_evaluations']} distinct designs), "
+             f"{search['generations']} generations, {search['wall_s']:.1f} s wall; {search['message']}"]
+    grid = report.get("grid")
+    if grid:
+        if grid["best"]:
+            lines.append(f"- grid of the same budget ({grid['points_per_axis']} per axis, {grid['evaluations']} "
+                         f"evaluations): best {show(grid['best']['x'])}: J = {grid['best']['objective']:.6g}; the "
+                         f"optimiser {'matches or beats it' if grid['optimizer_matches_or_beats_grid'] else 'does not beat it'}")
+        else:
+            lines.append("- grid of the same budget: every grid point was rejected by the FMU")
+    sensitivity = report["sensitivity"]
+    lines += ["", f"Sensitivity at the optimum (one parameter at a time, +-{100 * sensitivity['fraction_of_range']:g}% "
+                  "of its range):", "", "| parameter | at | step to | J change | step to | J change |",
+              "|---|---|---|---|---|---|"]
+    for row in sensitivity["parameters"]:
+        lines.append(f"| {row['name']} | {row['at']:.6g} | {row['minus']:.6g} | {_signed(row['change_minus'])} | "
+                     f"{row['plus']:.6g} | {_signed(row['change_plus'])} |")
+    return lines
+
+
+def _signed(number: Optional[float]) -> str:
+    return "n/a" if number is None else f"{number:+.4g}"
+
+
+def _number(number: Optional[float]) -> str:
+    return "n/a" if number is None else f"{number:.6g}"
+
+
+def _formula(problem: Problem) -> str:
+    if problem.objective == "perfectibility":
+        return f"-100 (w_DI {problem.damping} / DI_ref + w_V V_rms / V_rms_ref)"
+    return "w_amplitude peak_with / peak_without + w_transmissibility peak / Y - w_power P_mean / P_ref"
