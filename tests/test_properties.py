@@ -12,6 +12,15 @@ from hypothesis import strategies as st
 from piezo_fmu import EXPLICIT, Parameters, Simulator
 
 DURATION = 0.3
+EPS = 2.0**-52
+
+
+def ledger_tolerance(sim, flowed: float) -> float:
+    """How closely the energy ledger closes (J): to 1e-9 of the energy that flowed, and never finer
+    than the energy of rounding the contact's offset, a few ulp of the gap in the barrier's
+    stiffness (the balance of a body released at rest on a barrier, with some 1e-69 J of energy,
+    meets that floor: rounding a position of d/2 puts about 1e-32 J in the contact)."""
+    return 1e-9 * flowed + sim.barrier.K_eq * (4 * EPS * sim.params.d) ** 2
 
 
 @st.composite
@@ -95,7 +104,7 @@ def test_random_damper_runs_with_bounded_work_exact_momentum_and_closed_ledger(p
     assert_momentum_exact_at_switches(sim)
     e = sim.energy
     flowed = e.initial + abs(e.work_base) + e.dissipated + e.total
-    assert abs(e.balance_error) <= 1e-9 * flowed
+    assert abs(e.balance_error) <= ledger_tolerance(sim, flowed)
 
 
 @settings(suppress_health_check=[HealthCheck.too_slow], deadline=None)
