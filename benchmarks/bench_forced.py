@@ -31,13 +31,13 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))  # the harness package, when not installed
+sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
-from harness import cli  # noqa: E402
-from harness import frequency_response as fr  # noqa: E402
-from harness.engine import ProcessPool, default_jobs  # noqa: E402
-from harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
-from harness.sweep import execute, open_sweep  # noqa: E402
+from piezo_fmu_harness import cli  # noqa: E402
+from piezo_fmu_harness import frequency_response as fr  # noqa: E402
+from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from piezo_fmu_harness.sweep import execute, open_sweep  # noqa: E402
 
 
 def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:

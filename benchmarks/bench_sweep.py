@@ -40,15 +40,15 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))  # the harness package, when not installed
+sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from fmpy import simulate_fmu  # noqa: E402
 
-from harness import analysis, cli  # noqa: E402
-from harness.engine import ProcessPool, default_jobs  # noqa: E402
-from harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
-from harness.spec import DEFAULT_SWEEP_STEP  # noqa: E402
-from harness.sweep import display, execute, open_sweep, write_results  # noqa: E402
+from piezo_fmu_harness import analysis, cli  # noqa: E402
+from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from piezo_fmu_harness.spec import DEFAULT_SWEEP_STEP  # noqa: E402
+from piezo_fmu_harness.sweep import display, execute, open_sweep, write_results  # noqa: E402
 
 TARGET_NAIVE = 5.0
 TARGET_CORE = 1.5

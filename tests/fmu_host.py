@@ -41,7 +41,7 @@ def write_record(name: str, data) -> None:
 
 def run_cli(*argv) -> int:
     """``piezo-fmu ARGV`` in this process; its exit status."""
-    from harness import cli
+    from piezo_fmu_harness import cli
 
     return cli.main([str(a) for a in argv])
 

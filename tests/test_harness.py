@@ -20,9 +20,9 @@ import pytest
 from fmpy import simulate_fmu
 from fmu_host import assert_refused, run_cli
 
-from harness import cli
-from harness.analysis import PAPER_ZONES, open_dataset, perfectibility
-from harness.fmu import FmuModel, Instance
+from piezo_fmu_harness import cli
+from piezo_fmu_harness.analysis import PAPER_ZONES, open_dataset, perfectibility
+from piezo_fmu_harness.fmu import FmuModel, Instance
 
 ROOT = Path(__file__).resolve().parent.parent
 METRICS = {"impact_count": "impact_count", "DI": "damping_inclination", "V_rms": "voltage_rms",
@@ -170,7 +170,7 @@ def test_dask_backend_gives_the_results_of_the_process_pool(pool_sweep, fmu, tmp
 
 def test_resume_after_a_killed_sweep_runs_each_point_exactly_once(fmu, tmp_path):
     # Points of 1 s at a 1e-4 s step take long enough (~0.1 s each) to kill the run midway.
-    argv = [sys.executable, "-m", "harness", "sweep", *GRID, "--stop-time", "1", "--step", "1e-4",
+    argv = [sys.executable, "-m", "piezo_fmu_harness", "sweep", *GRID, "--stop-time", "1", "--step", "1e-4",
             "--jobs", "2", "--out", str(tmp_path), "--fmu", str(fmu), "--no-progress"]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     process = subprocess.Popen(argv, cwd=ROOT, env=env, start_new_session=True,
@@ -198,7 +198,7 @@ def test_resume_after_a_killed_sweep_runs_each_point_exactly_once(fmu, tmp_path)
 
 
 def test_a_sweep_file_in_toml_reads_like_the_command_line(fmu, tmp_path):
-    from harness.spec import load_toml, parse_grid
+    from piezo_fmu_harness.spec import load_toml, parse_grid
 
     model = FmuModel(fmu)
     path = tmp_path / "sweep.toml"
@@ -279,7 +279,7 @@ def test_resuming_with_other_arguments_is_refused(pool_sweep, fmu, capsys):
 
 def test_the_command_exits_with_status_2_on_bad_input(fmu, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    done = subprocess.run([sys.executable, "-m", "harness", "sweep", "--grid", "x1=0:0.03:4",
+    done = subprocess.run([sys.executable, "-m", "piezo_fmu_harness", "sweep", "--grid", "x1=0:0.03:4",
                            "--set", "m=-1", "--out", str(tmp_path), "--fmu", str(fmu)],
                           cwd=ROOT, env=env, capture_output=True, text=True)
     assert done.returncode == 2
@@ -289,7 +289,7 @@ def test_the_command_exits_with_status_2_on_bad_input(fmu, tmp_path):
 def test_zones_connected_parts_are_scipys_labels():
     from scipy import ndimage
 
-    from harness.analysis import connected_parts
+    from piezo_fmu_harness.analysis import connected_parts
 
     rng = np.random.default_rng(13)
     for shape in [(31, 31), (7, 9, 5), (40,), (6, 5, 4, 3)]:

@@ -16,11 +16,12 @@ import pytest
 from fmpy import simulate_fmu
 from fmu_host import assert_refused, run_cli
 
-from harness.fmu import FmuModel
-from harness.load import find_optimum
+from piezo_fmu_harness.fmu import FmuModel
+from piezo_fmu_harness.load import find_optimum
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
+HARNESS = ROOT / "src" / "piezo_fmu_harness"
 STOP = 0.3
 #: 1e5 .. 1e8 Ohm, five loads: brackets the optimum (about 3 MOhm) with two loads on each side.
 BRACKET = ["--r-min", 1e5, "--r-max", 1e8, "--count", 5]
@@ -202,7 +203,7 @@ def test_bad_input_is_refused_with_exit_status_2(tmp_path, capsys, command, argv
 # -- the harness knows the FMU only ----------------------------------------------------------------
 
 def test_the_harness_never_imports_the_core():
-    for path in sorted((ROOT / "harness").glob("*.py")):
+    for path in sorted(HARNESS.glob("*.py")):
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
@@ -211,7 +212,7 @@ def test_the_harness_never_imports_the_core():
             else:
                 continue
             assert not any(name.split(".")[0] == "piezo_fmu" for name in names), (path.name, names)
-    modules = [f"harness.{p.stem}" for p in sorted((ROOT / "harness").glob("*.py")) if p.stem != "__main__"]
+    modules = [f"piezo_fmu_harness.{p.stem}" for p in sorted(HARNESS.glob("*.py")) if p.stem != "__main__"]
     code = (f"import sys, importlib\nfor m in {modules!r}: importlib.import_module(m)\n"
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'piezo_fmu'))")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from fmu_host import assert_refused, run_cli
 
-from harness.fmu import FmuModel, Instance
+from piezo_fmu_harness.fmu import FmuModel, Instance
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

@@ -1,6 +1,6 @@
 """Faults in sweeps (issue 6): a worker killed in the middle of a sweep, a sweep killed outright.
 
-A sweep must never lose a result. Each test runs ``piezo-fmu sweep`` (``python -m harness``) in
+A sweep must never lose a result. Each test runs ``piezo-fmu sweep`` (``python -m piezo_fmu_harness``) in
 a child process, as a user does, over a 4 x 4 grid of points of 1 s at a 0.1 ms step (about
 0.1 s each, so there is a middle to kill in), and reads ``points.jsonl``:
 
@@ -47,7 +47,7 @@ def record_faults():
 
 
 def sweep_command(out: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "harness", "sweep", *GRID, "--stop-time", "1", "--step", "1e-4", "--jobs", "2",
+    return [sys.executable, "-m", "piezo_fmu_harness", "sweep", *GRID, "--stop-time", "1", "--step", "1e-4", "--jobs", "2",
             "--out", str(out), "--fmu", str(FMU), "--no-progress", *extra]
 
 

@@ -482,7 +482,7 @@ def _whole(value: int, option: str, lowest: int, what: str) -> int:
 def _frequency_spec(args, model, instance, defaults: Optional[dict] = None, searched: tuple = ()):
     """The study the options ask for, checked (values, ranges, and the FMU's own checks);
     ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the
-    band's (:data:`harness.frequency_response.BAND_DEFAULTS` unless given)."""
+    band's (:data:`piezo_fmu_harness.frequency_response.BAND_DEFAULTS` unless given)."""
     from . import frequency_response as fr
     from .load import circuit_constants
     from .spec import check_with_fmu

@@ -1,7 +1,7 @@
 """The sweep engine's backends: where the points of a sweep run.
 
 Each worker extracts nothing itself and instantiates the FMU once; every point then resets the
-instance, sets its parameters and steps it (:meth:`harness.fmu.Instance.run_point`). Points
+instance, sets its parameters and steps it (:meth:`piezo_fmu_harness.fmu.Instance.run_point`). Points
 come back in the order they finish, as JSON-safe records.
 
 - :class:`ProcessPool` (default): local worker processes, one per core. FMU instances in one

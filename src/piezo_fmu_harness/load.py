@@ -155,7 +155,7 @@ def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance
     """Run the load sweep of each model in ``models`` and write its files into ``out``.
 
     ``instance`` (on ``unzipdir``) reads the constants and, with ``jobs == 1``, runs the points;
-    otherwise a :class:`harness.engine.ProcessPool` of ``jobs`` workers runs them. Returns the
+    otherwise a :class:`piezo_fmu_harness.engine.ProcessPool` of ``jobs`` workers runs them. Returns the
     summary written to ``load_sweep.json``.
     """
     out = Path(out)

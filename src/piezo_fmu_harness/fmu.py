@@ -65,7 +65,7 @@ def default_fmu_path() -> Path:
     local = Path.cwd() / "fmus" / FMU_NAME
     if local.is_file():
         return local
-    return Path(__file__).resolve().parent.parent / "fmus" / FMU_NAME
+    return Path(__file__).resolve().parents[2] / "fmus" / FMU_NAME
 
 
 @dataclass(frozen=True)

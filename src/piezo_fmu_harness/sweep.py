@@ -150,7 +150,7 @@ def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZO
     """The results of one finished sweep, not yet written: ``{"dataset", "zones", "masks",
     "paper_zone", "files", "figures"}``. ``files`` are written by ``write`` (a function of no
     argument, under the key ``write``); ``figures`` are the calls that draw the contours (and
-    Eq. 29's DI beside DI_ls when the sweep ranks by DI_ls), for :class:`harness.figures.Rendering`."""
+    Eq. 29's DI beside DI_ls when the sweep ranks by DI_ls), for :class:`piezo_fmu_harness.figures.Rendering`."""
     ds = analysis.build_dataset(run.spec, run.done, model, damping)
     zones = analysis.zones_report(ds, quantile)
     masks = {metric: analysis.top_zone(ds, metric, quantile)[0] for metric in analysis.zone_kinds(ds)}

@@ -11,7 +11,7 @@ damper) unless given:
   ``--damping ls``) and ``V_rms``, both to be large, over ``stop_time`` from the nominal release.
   ``J = -100 (w_DI DI / DI_ref + w_V V_rms / V_ref)``: with the default weights 0.5 and 0.5,
   ``-J`` is eq. 31's perfectibility with the maxima replaced by the reference values.
-- ``forced`` (harmonic base motion over a band, :mod:`harness.frequency_response`; one sweep up
+- ``forced`` (harmonic base motion over a band, :mod:`piezo_fmu_harness.frequency_response`; one sweep up
   with the damper): terms ``amplitude``, the peak steady-state amplitude over the band with the
   damper over the same peak without it (to be small), ``transmissibility``, the peak amplitude over
   ``Y`` (to be small), and ``power``, the mean harvested power over the band over the reference

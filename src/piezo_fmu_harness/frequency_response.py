@@ -4,7 +4,7 @@ frequency, with and without the damper, through the FMU.
 The base moves as ``y = Y sin(w t)``, ``Y`` given directly or as ``A / w^2`` for an acceleration
 amplitude ``A``; ``w`` runs over ``count`` evenly spaced values between ``ratio_min`` and
 ``ratio_max`` times ``sqrt(K/M)``. At each frequency the steady state is found by shooting and
-verified by simulation (:mod:`harness.steady_state`), starting from the previous frequency's final
+verified by simulation (:mod:`piezo_fmu_harness.steady_state`), starting from the previous frequency's final
 state, so that a sweep follows one branch of coexisting orbits until it ends (a jump). Four chains
 run: with and without the damper, each up and down. Without the damper, the gap is widened until
 the impact mass cannot reach a barrier, as for Fig. 3a.
@@ -230,7 +230,7 @@ def open_frequency_run(model: FmuModel, spec: FrequencySpec, folder: Path, resum
 
 def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> threading.Thread:
     """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives; return
-    the warm-up of the writers started meanwhile (:func:`harness.warmup.preload`)."""
+    the warm-up of the writers started meanwhile (:func:`piezo_fmu_harness.warmup.preload`)."""
     from tqdm import tqdm
 
     from .warmup import preload

@@ -14,7 +14,7 @@ Without the damper: the same FMU and the same main mass ``M`` on ``K`` and ``C``
 checks that it made no impact). The impact mass then exerts no force at all, which is the main
 mass alone.
 
-Run it with ``piezo-fmu nominal`` (or ``python -m harness nominal``).
+Run it with ``piezo-fmu nominal`` (or ``python -m piezo_fmu_harness nominal``).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import numpy as np
 from fmpy import simulate_fmu
 from fmpy.fmi1 import FMICallException
 
-from harness.fmu import FmuModel, FmuRunError, Instance
-from harness.spec import DEFAULT_STOP_TIME
+from piezo_fmu_harness.fmu import FmuModel, FmuRunError, Instance
+from piezo_fmu_harness.spec import DEFAULT_STOP_TIME
 
 #: Communication step of the nominal time series (s).
 NOMINAL_STEP = 1e-4
@@ -105,7 +105,7 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     files = {"timeseries": out / "timeseries.csv", "summary": out / "summary.json"}
     write_csv(files["timeseries"], columns)
 
-    from harness import figures
+    from piezo_fmu_harness import figures
 
     changed = ", ".join(f"{k} = {v:g}" for k, v in overrides.items())
     title = f"{'nominal' if not changed else 'nominal with ' + changed}, {stop_time:g} s"
