@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
+.PHONY: nominal test dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -41,6 +41,12 @@ frequency-response: $(STAMP)
 test: system-deps $(STAMP)
 	$(BIN)/python -m pytest
 
+# A wheel and an sdist in dist/, checked by twine.
+dist: $(STAMP)
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/python -m twine check --strict dist/*
+
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
 # The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
 fmu: $(STAMP)
@@ -74,4 +80,4 @@ bench-forced: $(STAMP)
 	$(BIN)/python benchmarks/bench_forced.py
 
 clean:
-	rm -rf $(VENV) results build
+	rm -rf $(VENV) results build dist

@@ -62,6 +62,19 @@ def pool_sweep(fmu, tmp_path_factory) -> Path:
     return out
 
 
+
+def test_results_go_to_results_in_the_working_directory_by_default(fmu, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert run_cli("sweep", "--grid", "m=0.02:0.2:2", "--stop-time", 0.2, "--jobs", 1, "--fmu", fmu,
+                   "--no-progress") == 0
+    assert run_cli("nominal", "--stop-time", 0.1, "--fmu", fmu) == 0
+    assert (tmp_path / "results" / "sweep" / "points.jsonl").is_file()
+    assert (tmp_path / "results" / "nominal" / "summary.json").is_file()
+    parser = cli._parser()
+    for command in ("nominal", "two-designs", "load-sweep", "impact-voltage", "frequency-response"):
+        assert parser.parse_args([command]).out == Path("results") / command
+    assert parser.parse_args(["optimize", "--param", "m=0.02:0.2"]).out == Path("results") / "optimize"
+
 # -- nominal ---------------------------------------------------------------------------------------
 
 def test_nominal_writes_its_files_and_its_summary_equals_a_direct_fmpy_run(fmu, tmp_path, capsys):

@@ -68,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
         sub.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                          help="set an FMU parameter (SI), repeatable")
         sub.add_argument("--fmu", type=Path, default=None,
-                         help="the FMU (default $PIEZO_FMU or fmus/PiezoImpactDamper.fmu)")
+                         help="the FMU (default $PIEZO_FMU, else the FMI 2.0 FMU installed with the package)")
 
     def common(sub, step_default: float, step_help: str) -> None:
         sub.add_argument("--stop-time", type=float, default=None, metavar="S",
@@ -135,7 +135,7 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--config", type=Path, metavar="FILE.toml",
                        help="grids and values from a TOML file ([grid], [set], stop_time, step, out)")
     sweep.add_argument("--out", type=Path, default=None, metavar="DIR",
-                       help="results folder (default results/PRESET for a preset)")
+                       help="results folder (default results/PRESET for a preset, else results/sweep)")
     engine(sweep)
     sweep.add_argument("--zone-quantile", type=float, default=None, metavar="Q",
                        help="our zones are the points at or above this quantile of each metric (default 0.9)")
@@ -258,8 +258,8 @@ def main(argv: Optional[list[str]] = None) -> int:
 def _model(args):
     from .fmu import FmuModel, default_fmu_path
 
-    path = args.fmu or default_fmu_path()
     try:
+        path = args.fmu or default_fmu_path()
         return FmuModel(path)
     except FileNotFoundError as error:
         raise UsageError(str(error)) from None
@@ -753,9 +753,7 @@ def _sweep_specs(args, model) -> tuple[list[tuple[str, object, Path]], Optional[
         panels, names = None, [None]
     out = args.out or (Path(config["out"]) if "out" in config else None)
     if out is None:
-        if not args.preset:
-            raise UsageError("--out DIR is required (the folder for the sweep's results)")
-        out = Path("results") / args.preset
+        out = Path("results") / (args.preset or "sweep")
 
     sweeps = []
     for name in names:

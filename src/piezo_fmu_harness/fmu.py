@@ -1,7 +1,7 @@
 """The FMU as the harness sees it: where it is, what its modelDescription declares, and one
 reusable co-simulation instance driven through fmpy.
 
-The harness knows the piezo-impact damper only through ``fmus/PiezoImpactDamper.fmu``: names,
+The harness knows the piezo-impact damper only through ``PiezoImpactDamper.fmu``: names,
 types, units and bounds of the parameters come from its modelDescription, and every run goes
 through :mod:`fmpy`. Nothing here imports the simulation core.
 """
@@ -25,9 +25,10 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
+from . import fmus
+
 #: Environment variable that points the harness at another FMU file.
 FMU_ENV = "PIEZO_FMU"
-FMU_NAME = "PiezoImpactDamper.fmu"
 
 #: The FMU's end-of-run outputs that make a point's metrics, under the names the harness uses
 #: (the paper's symbols where it has one). Units are SI: DI in m/s, voltages in V, power in W,
@@ -58,14 +59,11 @@ class FmuRunError(RuntimeError):
 
 
 def default_fmu_path() -> Path:
-    """The FMU to use when none is given: ``$PIEZO_FMU``, else ``fmus/PiezoImpactDamper.fmu``
-    in the working directory, else the one in this repository."""
+    """The FMU to use when none is given: ``$PIEZO_FMU`` when it is set, else the FMI 2.0 FMU
+    installed with the package (:func:`piezo_fmu_harness.fmus.path`)."""
     if os.environ.get(FMU_ENV):
         return Path(os.environ[FMU_ENV])
-    local = Path.cwd() / "fmus" / FMU_NAME
-    if local.is_file():
-        return local
-    return Path(__file__).resolve().parents[2] / "fmus" / FMU_NAME
+    return fmus.path(fmi_version=2)
 
 
 @dataclass(frozen=True)
