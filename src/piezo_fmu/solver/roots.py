@@ -77,6 +77,9 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
               values: list[float] | None = None) -> list[float]:
     """All ``s`` in ``(0, 1]`` where the polynomial ``a`` changes sign in ``direction``.
 
+    A root exactly at ``s = 0`` is never reported (it belongs to the previous bracket); one
+    exactly at ``s = 1`` is.
+
     Parameters
     ----------
     a : power coefficients, ``a(s) = sum_k a[k] s^k``.
@@ -86,9 +89,6 @@ def crossings(a: np.ndarray, direction: int, b: np.ndarray | None = None, noise:
         counts as zero, so a function that is zero to rounding has no sign changes (rounding
         noise would otherwise look like a swarm of roots).
     values : ``b`` as a list of floats, when already made.
-
-    A root exactly at ``s = 0`` is never reported (it belongs to the previous bracket); one
-    exactly at ``s = 1`` is.
     """
     if b is None:
         b = bernstein(a)
