@@ -9,7 +9,7 @@ The nominal case (docs/model.md section 7, 2 s, base at rest), timed side by sid
 - the same FMU as Model Exchange through ``fmpy.simulate_fmu`` with CVode at rtol 1e-6 to 1e-12,
   ``output_interval=1e-3`` and the events recorded;
 each FMU run best of ``--repeats`` (wall and CPU time). Then the accuracy of each Model Exchange
-run against the core (the convergence table of the README).
+run against the core (the convergence table in docs/fmu.md).
 """
 
 from __future__ import annotations

@@ -99,7 +99,7 @@ def hold_times(hold, duration):
 def test_random_damper_runs_with_bounded_work_exact_momentum_and_closed_ledger(params, base):
     times = hold_times(base[2], DURATION)
     sim = run(params, base, times)
-    # Bounded work: the contacts per second are bounded by the contact period (see README).
+    # Bounded work: the contacts per second are bounded by the contact period (docs/reliability.md).
     assert sim.brackets_opened <= work_bound(sim, len(times), DURATION)
     assert_momentum_exact_at_switches(sim)
     e = sim.energy

@@ -26,7 +26,7 @@ A host may run the damper for hours with inputs nobody checked. What is shown he
   reached from two initial conditions.
 - **Determinism.** The same inputs give bit-identical results in two fresh processes; and they
   should on any CPU, which they do not yet (the BLAS kernel OpenBLAS picks for the CPU changes
-  the last bits, then the impacts change the rest; the README's "Reliability" section).
+  the last bits, then the impacts change the rest; docs/reliability.md).
 
 The counts (cases tried, events per simulated second) are written to
 ``build/reliability/core.json`` and printed at the end of the module (``pytest -s``).

@@ -19,8 +19,8 @@ from .scalar import bracketed
 #: ``barrier_mode`` values: derive ``M_eq``/``K_eq`` from the beam geometry, or take them as given.
 DERIVED = 0
 EXPLICIT = 1
-#: The equivalent mass and stiffness printed in the paper (kg, N/m); see the README's departures
-#: from the paper: they cannot be derived from Table 1.
+#: The equivalent mass and stiffness printed in the paper (kg, N/m); see docs/model.md section 9,
+#: departures from the paper: they cannot be derived from Table 1.
 PRINTED_M_EQ = 0.0292
 PRINTED_K_EQ = 46.7753e6
 
