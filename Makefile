@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: nominal test dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
+.PHONY: nominal test docs dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -40,6 +40,12 @@ frequency-response: $(STAMP)
 
 test: system-deps $(STAMP)
 	$(BIN)/python -m pytest
+
+# The documentation site (docs/, mkdocs.yml) into build/site, strict: a broken link, a missing
+# reference or any other warning fails the build. NO_MKDOCS_2_WARNING silences the Material theme's
+# banner about its end of life.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --clean --site-dir build/site
 
 # A wheel and an sdist in dist/, checked by twine.
 dist: $(STAMP)

@@ -1,0 +1,86 @@
+"""The documentation (issue 14): the site builds in strict mode, the API reference covers every
+module, the README's links lead somewhere, and the example both pages show runs and prints what
+they say it prints.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+PACKAGES = (ROOT / "src" / "piezo_fmu", ROOT / "src" / "piezo_fmu_harness")
+MAX_FIGURE_BYTES = 150_000
+MAX_FIGURES_BYTES = 1_500_000
+
+
+def test_the_site_builds_in_strict_mode_without_a_warning(tmp_path):
+    # NO_MKDOCS_2_WARNING silences the Material theme's banner about its end of life, which is
+    # printed outside mkdocs's logging; anything mkdocs or a plugin warns about fails the build.
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                          cwd=ROOT, capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+    assert done.returncode == 0, done.stderr
+    assert "WARNING" not in done.stderr, done.stderr
+    assert (tmp_path / "site" / "index.html").is_file()
+    for page in ("model", "core", "fmu", "simulators", "harness", "validation", "crosscheck", "reliability",
+                 "benchmarks", "api/model", "api/solver", "api/fmi", "api/harness"):
+        assert (tmp_path / "site" / page / "index.html").is_file(), page
+    reference = (tmp_path / "site" / "api" / "harness" / "index.html").read_text()
+    assert 'id="piezo_fmu_harness.fmus.path"' in reference  # generated from the docstring
+
+
+def module_names() -> list[str]:
+    names = []
+    for package in PACKAGES:
+        for path in sorted(package.rglob("*.py")):
+            parts = (package.name,) + path.relative_to(package).with_suffix("").parts
+            if parts[-1] == "__main__":
+                continue
+            names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return names
+
+
+@pytest.mark.parametrize("name", module_names())
+def test_every_module_is_in_the_api_reference(name):
+    directives = set(re.findall(r"^::: (\S+)$", "\n".join(p.read_text() for p in (DOCS / "api").glob("*.md")), re.M))
+    assert name in directives, f"{name} has no '::: {name}' in docs/api/"
+
+
+def test_the_readme_links_lead_to_files_of_the_repository():
+    text = (ROOT / "README.md").read_text()
+    targets = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text)
+    assert targets
+    missing = [t for t in targets if not t.startswith("http") and not (ROOT / t).is_file()]
+    assert not missing, missing
+
+
+def test_the_figures_are_small():
+    sizes = {p.relative_to(ROOT): p.stat().st_size for p in DOCS.rglob("*.png")}
+    assert all(size < MAX_FIGURE_BYTES for size in sizes.values()), sizes
+    assert sum(sizes.values()) < MAX_FIGURES_BYTES, sum(sizes.values())
+    pages = "\n".join(p.read_text() for p in DOCS.rglob("*.md"))
+    unused = [str(p) for p in sizes if f"({p.relative_to('docs').as_posix()})" not in pages]
+    assert not unused, f"figures no page shows: {unused}"
+
+
+def fmpy_example(path: Path) -> str:
+    blocks = re.findall(r"```python\n(.*?)```", path.read_text(), re.S)
+    return next(block for block in blocks if "simulate_fmu" in block)
+
+
+def test_the_fmpy_example_runs_and_prints_what_the_pages_say(tmp_path):
+    example = fmpy_example(ROOT / "README.md")
+    assert example == fmpy_example(DOCS / "index.md"), "README.md and docs/index.md show different examples"
+    code_lines = [line for line in example.splitlines() if line.strip() and not line.startswith("#")]
+    assert len(code_lines) <= 10
+    expected = example.rstrip().splitlines()[-1].removeprefix("# ")
+    environ = {key: value for key, value in os.environ.items() if key != "PIEZO_FMU"}
+    done = subprocess.run([sys.executable, "-c", example], cwd=tmp_path, capture_output=True, text=True, env=environ)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == expected
