@@ -4,12 +4,7 @@ A wheel carries ``fmus/PiezoImpactDamper.fmu`` (FMI 2.0, co-simulation) and
 ``fmus/PiezoImpactDamper3.fmu`` (FMI 3.0, co-simulation and Model Exchange) as package data, in
 ``piezo_fmu_harness/fmu_files/``. A clone (or an editable install of it) has them in the
 repository's ``fmus/`` folder. :func:`path` returns the one that exists, so that a user, the
-harness and a script find the FMU the same way from any working directory::
-
-    from fmpy import simulate_fmu
-    from piezo_fmu_harness import fmus
-
-    result = simulate_fmu(fmus.path(), stop_time=2.0, output_interval=1e-4)
+harness and a script find the FMU the same way from any working directory.
 
 This module imports nothing but the standard library.
 """
