@@ -33,7 +33,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
-from piezo_fmu_harness import cli  # noqa: E402
+from piezo_fmu_harness import cli, commands, commands_forced  # noqa: E402
 from piezo_fmu_harness import frequency_response as fr  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
@@ -45,16 +45,16 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
     unzipdir = model.extract()
     instance = Instance(model, unzipdir)
     try:
-        spec = cli._frequency_spec(args, model, instance)
+        spec = commands_forced.frequency_spec(args, model, instance)
     finally:
         instance.free()
     run = fr.open_frequency_run(model, spec, out, resume=False, force=True)
     run.begin()
     begin = time.perf_counter()
-    warming = fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
+    fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
     simulation_s = time.perf_counter() - begin
     begin = time.perf_counter()
-    result = fr.finish(model, run, jobs, warming)
+    result = fr.finish(model, run, jobs)
     outputs_s = time.perf_counter() - begin
     shutil.rmtree(unzipdir, ignore_errors=True)
     records = list(run.done.values())
@@ -72,7 +72,7 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
 
 def free_decay(model: FmuModel, out: Path, jobs: int) -> dict:
     args = cli._parser().parse_args(["sweep", "--preset", "figs4-9", "--out", str(out)])
-    sweeps, _, _ = cli._sweep_specs(args, model)
+    sweeps, _, _ = commands.sweep_specs(args, model)
     runs = [open_sweep(model, spec, folder, resume=False, force=True) for _, spec, folder in sweeps]
     for run in runs:
         run.begin()

@@ -6,8 +6,6 @@
    communication step ``--step``, default the sweep default) on the local process pool over all
    cores, worker start-up included; then the results as ``piezo-fmu sweep`` writes them (NetCDF,
    CSV, zones, Figs. 4-9), timed apart: writing them should take at most 20% of the simulation.
-   The main process imports and warms up the writers while the workers simulate; the same sweep
-   and results are timed again in a fresh process without that warm-up, to show what it moves.
 2. The naive loop: ``fmpy.simulate_fmu(fmu_file, ...)`` called afresh per point, one core, the
    same communication step, on ``--naive-points`` points spread over the preset set; its
    points/s is extrapolated to the whole set.
@@ -33,7 +31,6 @@ import json
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -44,7 +41,7 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from fmpy import simulate_fmu  # noqa: E402
 
-from piezo_fmu_harness import analysis, cli  # noqa: E402
+from piezo_fmu_harness import analysis, cli, commands  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
 from piezo_fmu_harness.spec import DEFAULT_SWEEP_STEP  # noqa: E402
@@ -75,35 +72,22 @@ def per_point(run, subset: list) -> dict:
     return {"wall_s": wall / len(subset), "cpu_s": cpu / len(subset), "points_timed": len(subset)}
 
 
-def sweep_and_write(model, runs, sweeps, panels, out: Path, jobs: int, warm_up: bool) -> dict:
+def sweep_and_write(model, runs, sweeps, panels, out: Path, jobs: int) -> dict:
     """Run the sweeps on the process pool, then write their results; time both (wall and CPU)."""
     unzipdir = model.extract()
     begin, begin_cpu = time.perf_counter(), time.process_time()
-    warming = execute(runs, ProcessPool(model, unzipdir, jobs), progress=False, warm_up=warm_up)
+    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False)
     engine_s, main_cpu_s = time.perf_counter() - begin, time.process_time() - begin_cpu
     shutil.rmtree(unzipdir, ignore_errors=True)
     begin, before = time.perf_counter(), os.times()
     parts: dict = {}
-    results = write_results(model, runs, [name for name, _, _ in sweeps], panels, out, jobs=jobs, timings=parts,
-                            warming=warming)
+    results = write_results(model, runs, [name for name, _, _ in sweeps], panels, out, jobs=jobs, timings=parts)
     outputs_s, after = time.perf_counter() - begin, os.times()
     # CPU of this process and of the forked figure processes (reaped, so counted in os.times).
     outputs_cpu_s = sum(getattr(after, f) - getattr(before, f)
                         for f in ("user", "system", "children_user", "children_system"))
     return {"engine_s": engine_s, "main_cpu_s": main_cpu_s, "outputs_s": outputs_s, "outputs_cpu_s": outputs_cpu_s,
             "parts": parts, "total_s": engine_s + outputs_s, "results": results}
-
-
-def cold_pass(model, out: Path, step: float, jobs: int) -> None:
-    """The engine and the results once, without the warm-up of the writers; JSON on stdout."""
-    cli_args = cli._parser().parse_args(["sweep", "--preset", "figs4-9", "--out", str(out), "--step", repr(step)])
-    sweeps, panels, _ = cli._sweep_specs(cli_args, model)
-    runs = [open_sweep(model, spec, folder, resume=False, force=True) for _, spec, folder in sweeps]
-    for run in runs:
-        run.begin()
-    timed = sweep_and_write(model, runs, sweeps, panels, out, jobs, warm_up=False)
-    del timed["results"]
-    print(json.dumps(timed))
 
 
 def main() -> None:
@@ -117,12 +101,9 @@ def main() -> None:
     parser.add_argument("--compare-points", type=int, default=20)
     parser.add_argument("--fmu", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=None, help="keep the sweep results here")
-    parser.add_argument("--cold-pass", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
 
     model = FmuModel(args.fmu or default_fmu_path())
-    if args.cold_pass is not None:
-        return cold_pass(model, args.cold_pass, args.step, args.jobs)
     fmu_file = str(model.path)
     load_before = os.getloadavg()
     scratch = None if args.out else Path(tempfile.mkdtemp(prefix="bench_sweep_"))
@@ -130,7 +111,7 @@ def main() -> None:
     try:
         cli_args = cli._parser().parse_args(["sweep", "--preset", "figs4-9", "--out", str(out),
                                              "--step", repr(args.step)])
-        sweeps, panels, _ = cli._sweep_specs(cli_args, model)
+        sweeps, panels, _ = commands.sweep_specs(cli_args, model)
         runs = [open_sweep(model, spec, folder, resume=False, force=True) for _, spec, folder in sweeps]
         for run in runs:
             run.begin()
@@ -138,12 +119,8 @@ def main() -> None:
         stop_time = runs[0].spec.stop_time
 
         # 1. the engine, worker start-up included, then the results as the command writes them
-        timed = sweep_and_write(model, runs, sweeps, panels, out, args.jobs, warm_up=True)
+        timed = sweep_and_write(model, runs, sweeps, panels, out, args.jobs)
         engine_s, results = timed["engine_s"], timed.pop("results")
-        # ... and again in a fresh process, the writers not warmed up during the simulation
-        cold = json.loads(subprocess.run([sys.executable, __file__, "--cold-pass", str(out.with_name(out.name + "-cold")),
-                                          "--step", repr(args.step), "--jobs", str(args.jobs), "--fmu", fmu_file],
-                                         check=True, capture_output=True, text=True).stdout)
         records = [r for run in runs for r in run.done.values()]
         worker = {"wall_s": statistics.mean(r["seconds"] for r in records),
                   "cpu_s": statistics.mean(r["cpu_seconds"] for r in records)}
@@ -186,9 +163,7 @@ def main() -> None:
     engine_pps = total / engine_s
     ratios = {
         "wall": {"engine_over_naive": engine_pps * naive["wall_s"],
-                 "engine_cost_over_core": (engine_s / total * args.jobs) / core["wall_s"],
-                 # the same without the writers' warm-up, which takes CPU from the workers
-                 "engine_cost_over_core_cold": (cold["engine_s"] / total * args.jobs) / core["wall_s"]},
+                 "engine_cost_over_core": (engine_s / total * args.jobs) / core["wall_s"]},
         "cpu": {"engine_over_naive": args.jobs * naive["cpu_s"] / worker["cpu_s"],
                 "engine_cost_over_core": worker["cpu_s"] / core["cpu_s"]},
     }
@@ -199,8 +174,7 @@ def main() -> None:
         "engine": {"wall_s": engine_s, "points_per_s": engine_pps, "point_in_worker": worker,
                    "workers_cpu_s": sum(r["cpu_seconds"] for r in records),
                    "rejected_points": sum(r["status"] != "ok" for r in records)},
-        "outputs": {"warmed_up": timed, "cold": cold,
-                    "share_of_simulation": timed["outputs_s"] / engine_s},
+        "outputs": {**timed, "share_of_simulation": timed["outputs_s"] / engine_s},
         "naive_fmpy_loop": {**naive, "points_per_s": 1 / naive["wall_s"], "extrapolated_set_s": total * naive["wall_s"]},
         "core_in_process": {**core, "points_per_s": 1 / core["wall_s"], "extrapolated_set_one_core_s": total * core["wall_s"]},
         "ratios": ratios,
@@ -224,14 +198,12 @@ def main() -> None:
     print(f"load average before: {report['load_average_before']} (other programs on the cores slow the wall times)")
     print(f"engine      {engine_s:6.2f} s wall for {total} points = {engine_pps:6.1f} points/s; a point in a worker "
           f"{ms(worker['wall_s'])} wall, {ms(worker['cpu_s'])} CPU")
-    for name, run in (("warmed up", timed), ("cold", cold)):
-        parts = run["parts"]
-        print(f"outputs     {name:9s}: after {run['engine_s']:.2f} s of simulation (this process {run['main_cpu_s']:.2f} s "
-              f"CPU meanwhile), {run['outputs_s']:.2f} s wall = {100 * run['outputs_s'] / run['engine_s']:.0f}% of it "
-              f"(target <= {100 * TARGET_OUTPUTS:g}%), {run['outputs_cpu_s']:.2f} s CPU: datasets "
-              f"{parts['datasets_s']:.2f} s, {parts['figures']} figures in {args.jobs} processes "
-              f"{parts['figures_s']:.2f} s, NetCDF, CSV and zones meanwhile {parts['files_s']:.2f} s; simulation and "
-              f"outputs {run['total_s']:.2f} s")
+    parts = timed["parts"]
+    print(f"outputs     after {engine_s:.2f} s of simulation, {timed['outputs_s']:.2f} s wall = "
+          f"{100 * timed['outputs_s'] / engine_s:.0f}% of it (target <= {100 * TARGET_OUTPUTS:g}%), "
+          f"{timed['outputs_cpu_s']:.2f} s CPU: datasets {parts['datasets_s']:.2f} s, {parts['figures']} figures in "
+          f"{args.jobs} processes {parts['figures_s']:.2f} s, NetCDF, CSV and zones meanwhile {parts['files_s']:.2f} s; "
+          f"simulation and outputs {timed['total_s']:.2f} s")
     print(f"naive loop  {ms(naive['wall_s'])} wall, {ms(naive['cpu_s'])} CPU per point = {1 / naive['wall_s']:6.1f} "
           f"points/s ({naive['points_timed']} points timed; the set would take {total * naive['wall_s']:.0f} s)")
     print(f"core        {ms(core['wall_s'])} wall, {ms(core['cpu_s'])} CPU per point = {1 / core['wall_s']:6.1f} "
@@ -239,8 +211,7 @@ def main() -> None:
     for kind in ("wall", "cpu"):
         r = ratios[kind]
         print(f"ratios ({kind:4s}) engine / naive = {r['engine_over_naive']:5.2f} (target >= {TARGET_NAIVE:g}); "
-              f"engine per core costs {r['engine_cost_over_core']:4.2f}x the core (target <= {TARGET_CORE:g})"
-              + (f"; {r['engine_cost_over_core_cold']:4.2f}x without the writers' warm-up" if kind == "wall" else ""))
+              f"engine per core costs {r['engine_cost_over_core']:4.2f}x the core (target <= {TARGET_CORE:g})")
     print(f"step price  (CPU, {len(compare)} points, one instance; 'predicted' for {args.jobs} workers)")
     for step, row in steps.items():
         print(f"  step {float(step):<7g} worker {ms(row['worker_point_cpu_s'])} ({row['worker_over_core']:.2f}x core), "

@@ -20,7 +20,7 @@ import pytest
 from fmpy import simulate_fmu
 from fmu_host import assert_refused, run_cli
 
-from piezo_fmu_harness import cli
+from piezo_fmu_harness import cli, commands
 from piezo_fmu_harness.analysis import PAPER_ZONES, open_dataset, perfectibility
 from piezo_fmu_harness.fmu import FmuModel, Instance
 
@@ -226,7 +226,7 @@ def test_a_sweep_file_in_toml_reads_like_the_command_line(fmu, tmp_path):
 
 def test_presets_cover_the_papers_figures_4_to_9(fmu, tmp_path):
     args = cli._parser().parse_args(["sweep", "--preset", "figs4-9", "--out", str(tmp_path)])
-    sweeps, panels, _ = cli._sweep_specs(args, FmuModel(fmu))
+    sweeps, panels, _ = commands.sweep_specs(args, FmuModel(fmu))
     specs = {name: spec for name, spec, _ in sweeps}
     assert panels == {"a": "x1-m", "b": "x1-d"}
     x1m, x1d = specs["x1-m"], specs["x1-d"]

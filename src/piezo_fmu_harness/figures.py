@@ -54,19 +54,6 @@ def _save(fig, path: Path, layout: bool = True) -> Path:
     return path
 
 
-def warm_up() -> None:
-    """Draw a small contour figure with a colorbar, mathtext and a legend into memory: loads the
-    fonts and the mathtext parser once, before the real figures (and before they are forked)."""
-    import io
-
-    fig, ax = _figure((2.0, 2.0))
-    filled = ax.contourf(np.eye(3), levels=4)
-    fig.colorbar(filled, ax=ax, label="$V_{rms}$ (V)")
-    ax.plot([0, 1], [0, 1], "k--", label="$x_1$")
-    ax.legend(fontsize=7)
-    fig.savefig(io.BytesIO(), format="png", dpi=20)
-
-
 def axis_scale(units: str) -> tuple[float, str]:
     """Factor and unit to show a parameter in (metres as millimetres)."""
     return UNIT_DISPLAY.get(units, (1.0, units))

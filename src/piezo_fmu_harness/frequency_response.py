@@ -24,9 +24,7 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 from __future__ import annotations
 
 import json
-import math
 import sys
-import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -228,15 +226,11 @@ def open_frequency_run(model: FmuModel, spec: FrequencySpec, folder: Path, resum
     return FrequencyRun(spec, folder, done, header, start_over)
 
 
-def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> threading.Thread:
-    """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives; return
-    the warm-up of the writers started meanwhile (:func:`piezo_fmu_harness.warmup.preload`)."""
+def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None:
+    """Run every unfinished point, appending each record to ``points.jsonl`` as it arrives."""
     from tqdm import tqdm
 
-    from .warmup import preload
-
     tasks = run.first_tasks()
-    loading = preload()
     bar = tqdm(total=run.total, initial=len(run.done), unit="pt", desc="frequency response", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True
@@ -250,7 +244,6 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> thre
         finally:
             bar.close()
             backend.close(cancel=interrupted)
-    return loading
 
 
 # -- results ---------------------------------------------------------------------------------------
@@ -414,11 +407,9 @@ def tidy_frame(ds):
     return frame
 
 
-def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1, warming: Optional[threading.Thread] = None) -> dict:
+def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
     """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes), after
-    the warm-up ``warming`` of :func:`execute`; return ``{"dataset", "summary", "files"}``."""
-    if warming is not None:
-        warming.join()
+    return ``{"dataset", "summary", "files"}``."""
     from . import figures
     from .analysis import save_dataset
 

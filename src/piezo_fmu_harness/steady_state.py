@@ -170,7 +170,7 @@ class HarmonicDrive:
         set_real, get_real = fmu.fmi2SetReal, fmu.fmi2GetReal
         refs, values = self._input_refs, self._input_values
         state_refs, state = self._state_refs, self._state_values
-        n, h = self.samples, self.h
+        h = self.h
         sections = []
         try:
             for _ in range(periods):

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +27,6 @@ from . import analysis, figures
 from .fmu import FmuModel
 from .spec import SweepSpec, UsageError
 from .store import SPEC_FILE, PointStore, open_folder
-from .warmup import preload
 
 
 @dataclass
@@ -78,11 +76,9 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     return SweepRun(spec, folder, done, header, start_over)
 
 
-def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None,
-            warm_up: bool = True) -> Optional[threading.Thread]:
+def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> None:
     """Run every unfinished point of ``runs`` on ``backend``, appending each record to its
-    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal.
-    Returns the warm-up of the writers started meanwhile (``warm_up``), for :func:`write_results`."""
+    sweep's ``points.jsonl`` as soon as it arrives. ``progress=None`` shows a bar on a terminal."""
     from tqdm import tqdm
 
     todo, stores = [], []
@@ -92,7 +88,6 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None,
                     for index, values in run.todo())
     total = sum(run.spec.size for run in runs)
     finished = total - len(todo)
-    loading = preload() if warm_up else None
     bar = tqdm(total=total, initial=finished, unit="pt", desc="sweep", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     interrupted = True
@@ -107,21 +102,17 @@ def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None,
         for store in stores:
             store.close()
         backend.close(cancel=interrupted)
-    return loading
 
 
 def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panels: Optional[dict], out: Path,
                   quantile: float = analysis.DEFAULT_ZONE_QUANTILE, damping: str = analysis.DEFAULT_DAMPING,
-                  jobs: int = 1, timings: Optional[dict] = None, warming: Optional[threading.Thread] = None) -> dict:
+                  jobs: int = 1, timings: Optional[dict] = None) -> dict:
     """Write every sweep's results (:func:`finish`) and their figures, drawn in ``jobs`` processes;
     with ``panels`` (a preset set: letter -> sweep name), the paper's Figs. 4-9 and a combined
     ``zones.json`` in ``out`` instead of each sweep's contours. Returns the results by name;
     ``timings``, if given, receives the seconds spent building the datasets and until every file
-    and figure is written (the figures are drawn in forked processes while the files are written).
-    ``warming`` is :func:`execute`'s warm-up of the writers, joined first."""
+    and figure is written (the figures are drawn in forked processes while the files are written)."""
     begin = time.perf_counter()
-    if warming is not None:
-        warming.join()
     results = {name: finish(model, run, quantile, damping) for name, run in zip(names, runs)}
     if panels:
         calls = figures.paper_figure_calls({letter: (results[name]["dataset"], results[name]["masks"],

@@ -1,0 +1,126 @@
+"""The load on the command line: ``piezo-fmu load-sweep`` and ``impact-voltage``."""
+
+from __future__ import annotations
+
+import sys
+
+from .checks import (
+    PROG,
+    assignments,
+    load_value,
+    open_model,
+    preflight,
+    times,
+    worker_count,
+)
+from .spec import DEFAULT_SWEEP_STEP, UsageError
+
+
+def voltage_models(model, args, allowed: tuple) -> tuple[int, ...]:
+    """``--models`` as voltage_model numbers, each within the FMU's bounds and in ``allowed``."""
+    parameter = model.parameters["voltage_model"]
+    chosen = []
+    for text in args.models.split(","):
+        text = text.strip()
+        try:
+            number = parameter.coerce(int(text) if text.lstrip("-").isdigit() else text)
+        except ValueError as error:
+            raise UsageError(f"--models {args.models}: {error}") from None
+        if number not in allowed:
+            raise UsageError(f"--models {args.models}: voltage_model = {number} (quasi-static, an open circuit) "
+                             f"harvests no energy; a load sweep takes voltage_model "
+                             f"{' or '.join(map(str, allowed))}")
+        if number not in chosen:
+            chosen.append(number)
+    return tuple(chosen)
+
+
+def circuit_overrides(model, args) -> dict:
+    """``--set`` for the load commands; also checks the FMU declares what they read."""
+    from .fmu import ENERGY_OUTPUTS
+    from .load import CONSTANTS
+
+    missing = ([n for n in ENERGY_OUTPUTS if n not in model.outputs]
+               + [n for n in CONSTANTS if n not in model.calculated])
+    if missing:
+        raise UsageError(f"--fmu {model.path}: the FMU lacks {', '.join(missing)} (an FMU older than the circuit "
+                         "voltage models' harvested energy outputs); rebuild it")
+    overrides = assignments(model, args.set)
+    clash = sorted(set(overrides) & {"R_load", "voltage_model"})
+    if clash:
+        raise UsageError(f"--set {clash[0]}: the load and the voltage model are what this command varies; give "
+                         "them with --r-min/--r-max/--load and --models")
+    return overrides
+
+
+def load_sweep(args) -> int:
+    from . import load
+    from .fmu import FmuRunError
+    from .spec import check_times, prepare_output_dir
+
+    model = open_model(args)
+    overrides = circuit_overrides(model, args)
+    models = voltage_models(model, args, load.CIRCUIT_MODELS)
+    r_min = load_value(model, load.DEFAULT_R_MIN if args.r_min is None else args.r_min, "--r-min")
+    r_max = load_value(model, load.DEFAULT_R_MAX if args.r_max is None else args.r_max, "--r-max")
+    if not r_min < r_max:
+        raise UsageError(f"--r-min {r_min:g} is not below --r-max {r_max:g}: "
+                         f"{'reversed' if r_min > r_max else 'empty'} range of R_load (give R_MIN < R_MAX, in Ohm)")
+    count = load.DEFAULT_COUNT if args.count is None else args.count
+    if count < 3:
+        raise UsageError(f"--count {count}: need at least 3 loads to locate an optimum")
+    stop_time, step = times(args, DEFAULT_SWEEP_STEP)
+    impact_step = load.IMPACT_STEP if args.impact_step is None else args.impact_step
+    check_times(stop_time, impact_step)
+    jobs = worker_count(args)
+    out = prepare_output_dir(args.out)
+    extremes = [{**overrides, "voltage_model": m, "R_load": r} for m in models for r in (r_min, r_max)]
+    unzipdir, instance = preflight(model, extremes, "load sweep")
+    try:
+        summary = load.run_load_sweep(model, out, unzipdir, instance, models, load.log_loads(r_min, r_max, count),
+                                      stop_time, step, overrides, jobs)
+        print("\n".join(load.summary_lines(summary)))
+        if not args.no_impact:
+            loads = {"paper's": float(model.parameters["R_load"].start), "optimum": load.best_load(summary)}
+            loads = {label: r for label, r in loads.items() if r is not None}
+            try:
+                result = load.run_impacts(model, out, instance, loads, (0, *models), impact_step, overrides,
+                                          stop_time)
+            except FmuRunError as error:
+                print(f"{PROG} load-sweep: no single-impact figures: {error}", file=sys.stderr)
+            else:
+                print("\n".join(load.impact_lines(result)))
+    finally:
+        load.cleanup(instance, unzipdir)
+    return 0
+
+
+def impact_voltage(args) -> int:
+    from . import load
+    from .fmu import FmuRunError
+    from .spec import prepare_output_dir
+
+    model = open_model(args)
+    overrides = circuit_overrides(model, args)
+    models = voltage_models(model, args, (0, *load.CIRCUIT_MODELS))
+    given = [load_value(model, value, "--load") for value in args.load]
+    stop_time, step = times(args, load.IMPACT_STEP)
+    out = prepare_output_dir(args.out)
+    nominal = float(model.parameters["R_load"].start)
+    checked = given or [nominal]
+    unzipdir, instance = preflight(model, [{**overrides, "voltage_model": m, "R_load": r}
+                                            for m in models for r in checked], "impact voltage")
+    try:
+        if given:
+            loads = {load.ohm_text(r): r for r in given}
+        else:
+            estimate = load.circuit_constants(instance, overrides)["R_opt_estimate_ohm"]
+            loads = {"paper's": nominal, "1/(omega_c C_p)": estimate}
+        result = load.run_impacts(model, out, instance, loads, models, step, overrides, stop_time)
+    except FmuRunError as error:
+        raise UsageError(f"impact voltage (--stop-time {stop_time:g} s bounds the search for the first impact): "
+                         f"{error}") from None
+    finally:
+        load.cleanup(instance, unzipdir)
+    print("\n".join(load.impact_lines(result)))
+    return 0
