@@ -78,7 +78,7 @@ def free_decay(model: FmuModel, out: Path, jobs: int) -> dict:
         run.begin()
     unzipdir = model.extract()
     begin = time.perf_counter()
-    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False).join()
+    execute(runs, ProcessPool(model, unzipdir, jobs), progress=False)
     wall = time.perf_counter() - begin
     shutil.rmtree(unzipdir, ignore_errors=True)
     records = [r for run in runs for r in run.done.values()]
