@@ -35,6 +35,7 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from piezo_fmu_harness import cli, commands, commands_forced  # noqa: E402
 from piezo_fmu_harness import frequency_response as fr  # noqa: E402
+from piezo_fmu_harness import frequency_results  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
 from piezo_fmu_harness.sweep import execute, open_sweep  # noqa: E402
@@ -54,7 +55,7 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
     fr.execute(run, ProcessPool(model, unzipdir, min(jobs, len(fr.CHAINS))), progress=False)
     simulation_s = time.perf_counter() - begin
     begin = time.perf_counter()
-    result = fr.finish(model, run, jobs)
+    result = frequency_results.finish(model, run, jobs)
     outputs_s = time.perf_counter() - begin
     shutil.rmtree(unzipdir, ignore_errors=True)
     records = list(run.done.values())
@@ -141,7 +142,7 @@ def main() -> None:
           f"{optimum['grid']['evaluations']} points; whole command (reference, search, grid, sensitivity, report) "
           f"{optimum['command_wall_s']:.1f} s")
     print(f"  optimum {optimum['optimum']}: J = {optimum['objective']:.4g}; grid best J = {optimum['grid_best']:.4g}")
-    print("\n".join(fr.summary_lines(forced["summary"])))
+    print("\n".join(frequency_results.summary_lines(forced["summary"])))
 
 
 if __name__ == "__main__":

@@ -19,9 +19,10 @@ import pytest
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.analysis import open_dataset
+from piezo_fmu_harness.drive import HarmonicDrive
 from piezo_fmu_harness.fmu import FmuModel, Instance
 from piezo_fmu_harness.frequency_response import linear_transmissibility, solve_point
-from piezo_fmu_harness.steady_state import HarmonicDrive, Settings
+from piezo_fmu_harness.steady_state import Settings
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

@@ -31,9 +31,10 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the
     band's (:data:`piezo_fmu_harness.frequency_response.BAND_DEFAULTS` unless given)."""
     from . import frequency_response as fr
+    from .drive import STATE_PARAMETERS
     from .load import circuit_constants
     from .spec import check_with_fmu
-    from .steady_state import STATE_PARAMETERS, Settings
+    from .steady_state import Settings
 
     defaults = defaults or fr.BAND_DEFAULTS
     overrides = assignments(model, args.set)
@@ -102,6 +103,7 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
 
 def frequency_response(args) -> int:
     from . import frequency_response as fr
+    from . import frequency_results
     from .engine import InProcess
 
     model = open_model(args)
@@ -134,8 +136,8 @@ def frequency_response(args) -> int:
     finally:
         instance.free()
         shutil.rmtree(unzipdir, ignore_errors=True)
-    result = fr.finish(model, run, jobs)
-    print("\n".join(fr.summary_lines(result["summary"])))
+    result = frequency_results.finish(model, run, jobs)
+    print("\n".join(frequency_results.summary_lines(result["summary"])))
     print(f"  results in {run.folder}")
     return 0
 
@@ -192,6 +194,7 @@ def terms_option(texts: list[str], option: str, allowed: tuple, positive: bool) 
 
 def optimize(args) -> int:
     from . import optimize as opt
+    from . import optimize_report
     from .engine import InProcess
     from .spec import check_times, check_with_fmu
 
@@ -259,8 +262,8 @@ def optimize(args) -> int:
             backend.close()
         instance.free()
         shutil.rmtree(unzipdir, ignore_errors=True)
-    opt.write_report(report, problem, folder, model)
-    print("\n".join(opt.report_lines(report, problem, model)))
+    optimize_report.write_report(report, problem, folder, model)
+    print("\n".join(optimize_report.report_lines(report, problem, model)))
     print(f"  results in {folder}")
     return 0
 

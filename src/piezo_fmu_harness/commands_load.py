@@ -54,7 +54,7 @@ def circuit_overrides(model, args) -> dict:
 
 
 def load_sweep(args) -> int:
-    from . import load
+    from . import impacts, load
     from .fmu import FmuRunError
     from .spec import check_times, prepare_output_dir
 
@@ -70,7 +70,7 @@ def load_sweep(args) -> int:
     if count < 3:
         raise UsageError(f"--count {count}: need at least 3 loads to locate an optimum")
     stop_time, step = times(args, DEFAULT_SWEEP_STEP)
-    impact_step = load.IMPACT_STEP if args.impact_step is None else args.impact_step
+    impact_step = impacts.IMPACT_STEP if args.impact_step is None else args.impact_step
     check_times(stop_time, impact_step)
     jobs = worker_count(args)
     out = prepare_output_dir(args.out)
@@ -84,19 +84,19 @@ def load_sweep(args) -> int:
             loads = {"paper's": float(model.parameters["R_load"].start), "optimum": load.best_load(summary)}
             loads = {label: r for label, r in loads.items() if r is not None}
             try:
-                result = load.run_impacts(model, out, instance, loads, (0, *models), impact_step, overrides,
+                result = impacts.run_impacts(model, out, instance, loads, (0, *models), impact_step, overrides,
                                           stop_time)
             except FmuRunError as error:
                 print(f"{PROG} load-sweep: no single-impact figures: {error}", file=sys.stderr)
             else:
-                print("\n".join(load.impact_lines(result)))
+                print("\n".join(impacts.impact_lines(result)))
     finally:
         load.cleanup(instance, unzipdir)
     return 0
 
 
 def impact_voltage(args) -> int:
-    from . import load
+    from . import impacts, load
     from .fmu import FmuRunError
     from .spec import prepare_output_dir
 
@@ -104,7 +104,7 @@ def impact_voltage(args) -> int:
     overrides = circuit_overrides(model, args)
     models = voltage_models(model, args, (0, *load.CIRCUIT_MODELS))
     given = [load_value(model, value, "--load") for value in args.load]
-    stop_time, step = times(args, load.IMPACT_STEP)
+    stop_time, step = times(args, impacts.IMPACT_STEP)
     out = prepare_output_dir(args.out)
     nominal = float(model.parameters["R_load"].start)
     checked = given or [nominal]
@@ -116,11 +116,11 @@ def impact_voltage(args) -> int:
         else:
             estimate = load.circuit_constants(instance, overrides)["R_opt_estimate_ohm"]
             loads = {"paper's": nominal, "1/(omega_c C_p)": estimate}
-        result = load.run_impacts(model, out, instance, loads, models, step, overrides, stop_time)
+        result = impacts.run_impacts(model, out, instance, loads, models, step, overrides, stop_time)
     except FmuRunError as error:
         raise UsageError(f"impact voltage (--stop-time {stop_time:g} s bounds the search for the first impact): "
                          f"{error}") from None
     finally:
         load.cleanup(instance, unzipdir)
-    print("\n".join(load.impact_lines(result)))
+    print("\n".join(impacts.impact_lines(result)))
     return 0

@@ -31,8 +31,8 @@ import shutil
 import signal
 import tempfile
 import threading
-from pathlib import Path
 from collections import deque
+from pathlib import Path
 from typing import Callable, Iterable, Iterator, Optional
 
 from .fmu import FmuModel, Instance

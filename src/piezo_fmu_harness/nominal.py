@@ -105,11 +105,11 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     files = {"timeseries": out / "timeseries.csv", "summary": out / "summary.json"}
     write_csv(files["timeseries"], columns)
 
-    from piezo_fmu_harness import figures
+    from piezo_fmu_harness import curves
 
     changed = ", ".join(f"{k} = {v:g}" for k, v in overrides.items())
     title = f"{'nominal' if not changed else 'nominal with ' + changed}, {stop_time:g} s"
-    fig3a, fig3b = figures.nominal_figures(with_damper["time"], with_damper, without_damper, out, title)
+    fig3a, fig3b = curves.nominal_figures(with_damper["time"], with_damper, without_damper, out, title)
     files.update(fig3a=fig3a, fig3b=fig3b)
 
     summary = {

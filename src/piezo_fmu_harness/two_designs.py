@@ -69,11 +69,11 @@ def run_two_designs(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float =
             columns[f"{output}_{name}"] = s[output]
     write_csv(files["timeseries"], columns)
 
-    from . import figures
+    from . import curves
 
     labels = {f"{name} (x1 = {d['x1'] * 1e3:g} mm, m = {d['m']:g} kg, d = {d['d'] * 1e3:g} mm)": series[name]
               for name, d in DESIGNS.items()}
-    files["figure"] = figures.two_designs_figure(series["designed"]["time"], labels, out, f"{stop_time:g} s")
+    files["figure"] = curves.two_designs_figure(series["designed"]["time"], labels, out, f"{stop_time:g} s")
     result["files"] = {key: str(path) for key, path in files.items()}
     files["json"].write_text(json.dumps(result, indent=2) + "\n")
     return result
