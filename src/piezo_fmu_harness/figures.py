@@ -193,15 +193,10 @@ class Sheets:
         return self._by_count[count]
 
 
-def sweep_figures(ds, zones: dict, paper_zone: Optional[dict], folder: Path) -> list[Path]:
+def sweep_figure_calls(ds, zones: dict, paper_zone: Optional[dict], folder: Path, sheets: Sheets) -> list[tuple]:
     """``DI.png`` (or ``DI_ls.png``, the damping measure ranked by), ``V_rms.png``, ``P_ave.png``
     and ``perfectibility.png`` of one sweep, each with its own zone (P_ave shares V_rms's) and the
-    paper's design zone; none beyond 2-D."""
-    return render(sweep_figure_calls(ds, zones, paper_zone, folder, Sheets()))
-
-
-def sweep_figure_calls(ds, zones: dict, paper_zone: Optional[dict], folder: Path, sheets: Sheets) -> list[tuple]:
-    """The figures of :func:`sweep_figures` as ``(function, *args)`` calls, to be run anywhere."""
+    paper's design zone, none beyond 2-D: as ``(function, *args)`` calls for :class:`Rendering`."""
     if len(ds["DI"].dims) > 2:
         return []
     measure = _measure(ds, "damping")
@@ -228,15 +223,10 @@ def damping_measures_figure(sheets: Sheets, ds, quantile: float, path: Path) -> 
                                   f"(top {100 * (1 - quantile):.0f}%)", path)
 
 
-def paper_figures(panels: dict, folder: Path) -> list[Path]:
-    """Figs. 4-9: one file per figure, panel (a) the (x1, m) sweep and (b) the (x1, d) sweep.
-
-    ``panels`` maps the panel letter to ``(dataset, zones, paper_zone)``."""
-    return render(paper_figure_calls(panels, folder, Sheets()))
-
-
 def paper_figure_calls(panels: dict, folder: Path, sheets: Sheets) -> list[tuple]:
-    """The figures of :func:`paper_figures` as ``(function, *args)`` calls, to be run anywhere."""
+    """Figs. 4-9, one file per figure, panel (a) the (x1, m) sweep and (b) the (x1, d) sweep, as
+    ``(function, *args)`` calls for :class:`Rendering`; ``panels`` maps the panel letter to
+    ``(dataset, zones, paper_zone)``."""
     return [(_paper_figure, sheets, panels, figure, metric, zone_of, Path(folder) / f"{figure}.png")
             for figure, (metric, zone_of) in PAPER_FIGURES.items()]
 
@@ -287,11 +277,6 @@ class Rendering:
             raise RuntimeError(f"figure writing failed in {len(failed)} of {len(self.children)} processes "
                                f"(exit codes {failed})")
         return [call[-1] for call in self.calls]
-
-
-def render(calls: list[tuple], jobs: int = 1) -> list[Path]:
-    """Draw figure ``calls`` in ``jobs`` processes (:class:`Rendering`); return their paths."""
-    return Rendering(calls, jobs).wait()
 
 
 def _render_share(calls: list[tuple], start: int, stride: int) -> None:

@@ -16,7 +16,7 @@ import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Iterator
 
 import numpy as np
 
@@ -298,12 +298,3 @@ def prepare_output_dir(path: Path, option: str = "--out") -> Path:
     if not os.access(path, os.W_OK | os.X_OK):
         raise UsageError(f"{option} {path}: output folder is not writable")
     return path
-
-
-def format_values(values: dict, model: Optional[FmuModel] = None) -> str:
-    """``name = value unit`` pairs for messages and titles."""
-    parts = []
-    for name, value in values.items():
-        unit = model.parameters[name].unit if model and name in model.parameters else None
-        parts.append(f"{name} = {value:g}{' ' + unit if unit else ''}")
-    return ", ".join(parts)

@@ -101,7 +101,6 @@ FMI3 = Target(3, "PiezoImpactDamper3", "fmi3.py", "piezo_fmu_slave3", _pythonfmu
 TARGETS = {2: FMI2, 3: FMI3}
 #: The FMI 2.0 FMU's file, the one the harness and the hosts use by default.
 DEFAULT_DEST = FMI2.dest
-SLAVE_MODULE = FMI2.slave_module
 
 
 # -- staging and the builders ------------------------------------------------------------------------
