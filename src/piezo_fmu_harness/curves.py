@@ -170,7 +170,8 @@ def frequency_figure_calls(ds, folder: Path) -> list[tuple]:
     """``amplitude.png`` (with and without the damper, up and down, the closed form without it),
     ``power.png`` (harvested power) and ``impacts.png`` (impacts per forcing cycle), against the
     frequency ratio, as calls for :class:`piezo_fmu_harness.figures.Rendering`; bands where the two directions differ are
-    shaded, points that did not settle are drawn hollow."""
+    shaded, the stable orbits are joined by lines, motions that are not periodic are drawn hollow
+    (with their amplitude envelope), and the unstable orbits met are grey crosses."""
     panels = (
         ("amplitude", 1e3, "main mass amplitude (mm), half peak-to-peak", ("with", "without"), "amplitude.png"),
         ("harvested_power", 1e3, "harvested power, both loads (mW)", ("with",), "power.png"),
@@ -195,9 +196,18 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
             settled = ds["settled"].sel(damper=damper, direction=direction).values == 1
             ax.plot(ratio, np.where(settled, y, np.nan), ls=style["ls"], color=style["color"], lw=1.2,
                     marker=style["marker"], ms=4, label=style["label"])
-            if (~settled).any():
-                ax.plot(ratio[~settled], y[~settled], ls="none", marker=style["marker"] or "o", ms=6,
+            loose = ds["verdict"].sel(damper=damper, direction=direction).values == "not periodic"
+            if loose.any():
+                ax.plot(ratio[loose], y[loose], ls="none", marker=style["marker"] or "o", ms=6,
                         mfc="none", color=style["color"])
+                if key == "amplitude":  # the envelope of the motion over its window
+                    low = ds["amplitude_min"].sel(damper=damper, direction=direction).values[loose] * factor
+                    high = ds["amplitude_max"].sel(damper=damper, direction=direction).values[loose] * factor
+                    ax.vlines(ratio[loose], low, high, color=style["color"], lw=0.8)
+        unstable = ds["unstable_damper"].values == damper
+        if unstable.any() and f"unstable_{key}" in ds:
+            ax.plot(ds["unstable_ratio"].values[unstable], ds[f"unstable_{key}"].values[unstable] * factor,
+                    ls="none", marker="x", ms=4, color="0.55", mew=0.8)
     if key == "amplitude":
         linear = ds["transmissibility_linear"].values * ds["base_amplitude"].values * factor
         ax.plot(ratio, linear, color="k", ls=":", lw=1.0, label="without damper, closed form")
@@ -206,7 +216,9 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
         ax.set_yscale("symlog", linthresh=1e-2)  # zero where nothing impacts, decades where it does
     if differ.any():
         ax.axvspan(np.nan, np.nan, color="C1", alpha=0.15, label="up and down differ (with damper)")
-    ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="not settled (hollow)")
+    ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="not periodic (hollow; bar: envelope)")
+    if ds.sizes.get("unstable", 0):
+        ax.plot([], [], ls="none", marker="x", ms=4, color="0.55", mew=0.8, label="unstable orbit met (never the response)")
     ax.set_xlabel(r"frequency ratio $\omega / \sqrt{K/M}$")
     ax.set_ylabel(label)
     ax.grid(alpha=0.3, which="both")

@@ -18,8 +18,10 @@ periods, to the phase where the impact mass is farthest from both barriers. The 
 ``P(x)`` is the state one forcing period later.
 
 **Measures** (over whole orbits of a verified steady state, after one orbit that lets the circuit
-of the piezoelectric patches settle): the main mass's amplitude (half its peak-to-peak; the extrema
-are refined on each step by the cubic Hermite interpolant of ``p`` and ``p'``), its RMS, the
+of the piezoelectric patches settle, or over a long window of a motion that is not periodic): the
+main mass's amplitude (half its peak-to-peak over the window; the extrema are refined on each step
+by the cubic Hermite interpolant of ``p`` and ``p'``), its envelope (the smallest and largest half
+peak-to-peak within one forcing period), its RMS, the
 transmissibility ``amplitude / Y``, impacts per forcing cycle, the RMS of the impact voltages
 ``V_rms`` and the mean harvested power (``harvested_energy`` over the window).
 
@@ -224,6 +226,9 @@ def measure(drive: HarmonicDrive, orbits_periods: int) -> dict:
     data = np.array(samples)
     p, v = data[:, 0], data[:, 1]
     top, bottom = hermite_extrema(p, v, drive.h)
+    n = drive.samples
+    envelope = [0.5 * np.subtract(*hermite_extrema(p[k * n:(k + 1) * n + 1], v[k * n:(k + 1) * n + 1], drive.h))
+                for k in range(orbits_periods)]
     impacts = count1 - count0
     done0, done1 = completed(data[0], count0), completed(data[-1], count1)
     # The square of voltage_rms times the completed impacts is the sum of their squares.
@@ -232,6 +237,8 @@ def measure(drive: HarmonicDrive, orbits_periods: int) -> dict:
     duration = orbits_periods * drive.period
     return {
         "amplitude": amplitude,
+        "amplitude_min": float(min(envelope)),
+        "amplitude_max": float(max(envelope)),
         "rms": float(np.sqrt(np.mean(p[:-1] ** 2))),
         "mean_displacement": float(np.mean(p[:-1])),
         "transmissibility": amplitude / drive.amplitude,

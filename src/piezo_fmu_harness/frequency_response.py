@@ -54,7 +54,10 @@ DEFAULT_VOLTAGE_MODEL = 1
 BAND_TOLERANCE = 1e-3
 #: Measures per point, with their units and descriptions (the Dataset's variables).
 MEASURES = {
-    "amplitude": ("m", "steady-state amplitude of the main mass, half its peak-to-peak"),
+    "amplitude": ("m", "steady-state amplitude of the main mass, half its peak-to-peak (over the window when not "
+                       "periodic)"),
+    "amplitude_min": ("m", "smallest half peak-to-peak of p within one forcing period (the envelope's low edge)"),
+    "amplitude_max": ("m", "largest half peak-to-peak of p within one forcing period (the envelope's high edge)"),
     "rms": ("m", "RMS of the main mass's displacement p over the steady-state orbit"),
     "transmissibility": ("1", "amplitude / base displacement amplitude Y"),
     "impacts_per_cycle": ("1", "impacts (contact onsets, both barriers) per forcing cycle"),
@@ -64,7 +67,12 @@ MEASURES = {
     "return_error": ("m", "largest return distance of the verified section (settled points)"),
     "cycles": ("1", "forcing cycles simulated to find and verify the steady state"),
     "newton_iterations": ("1", "Newton iterations spent"),
-    "order": ("1", "period of the orbit in forcing periods (0: not settled)"),
+    "order": ("1", "period of the orbit in forcing periods (0: not periodic)"),
+    "max_multiplier": ("1", "largest modulus of the orbit's Floquet multipliers, the free impact mass's neutral pair "
+                            "left out (< 1: stable)"),
+    "stability_margin": ("1", "1 - max_multiplier"),
+    "multiplier_error": ("1", "|max_multiplier at step h - at step 4h|: the accuracy of the multipliers"),
+    "unstable_orbits": ("1", "unstable periodic orbits met on the way at this frequency (unstable_orbits.csv)"),
     "seconds": ("s", "wall time of the point in its worker"),
 }
 

@@ -1,8 +1,8 @@
 """The results of a frequency response (:mod:`piezo_fmu_harness.frequency_response`): the
 dataset over ``(damper, direction, omega)``, where the two sweep directions differ, the summary
-(resonant amplitude with and without the damper, the band where it helps, the best harvested power)
-and the files: ``frequency_response.nc`` (xarray, units in attributes), ``frequency_response.csv``,
-``summary.json`` and the figures ``amplitude.png``, ``power.png``, ``impacts.png``.
+(resonant amplitude with and without the damper, the band where it helps, the best harvested power,
+the unstable orbits met) and the files: ``frequency_response.nc`` (xarray, units in attributes),
+``frequency_response.csv``, ``unstable_orbits.csv``, ``summary.json`` and the figures ``amplitude.png``, ``power.png``, ``impacts.png``.
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
@@ -31,7 +31,9 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
     data = {key: np.full(shape, np.nan) for key in MEASURES}
     settled = np.zeros(shape, dtype=np.int8)
     method = np.full(shape, "missing", dtype=object)
+    verdict = np.full(shape, "missing", dtype=object)
     error = np.full(shape, "", dtype=object)
+    multipliers = np.full(shape + (4,), complex(np.nan, np.nan))
     for chain, (damper, direction) in enumerate(CHAINS):
         position = (DAMPER_CASES.index(damper), DIRECTIONS.index(direction))
         for frequency in range(count):
@@ -41,20 +43,32 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
             where = (*position, frequency)
             for key in MEASURES:
                 value = record.get(key)
+                if key == "unstable_orbits":
+                    value = len(value or ())
                 data[key][where] = np.nan if value is None else value
             data["order"][where] = record.get("order") or 0
             settled[where] = bool(record.get("settled"))
             method[where] = record.get("method") if record["status"] == "ok" else "error"
+            verdict[where] = record.get("verdict", "error") if record["status"] == "ok" else "error"
             error[where] = record.get("error") or ""
+            for k, (real, imag) in enumerate(record.get("multipliers") or ()):
+                multipliers[(*where, k)] = complex(real, imag)
 
     omegas = spec.omegas
     dims = ("damper", "direction", "omega")
     variables = {key: (dims, values, {"units": MEASURES[key][0], "long_name": MEASURES[key][1]})
                  for key, values in data.items()}
-    variables["settled"] = (dims, settled, {"units": "1", "long_name": "1: the steady state was found and verified; "
-                                                                    "0: the cap on cycles was reached first"})
-    variables["method"] = (dims, method.astype(str), {"long_name": "newton, marching, none (not settled), error "
+    variables["settled"] = (dims, settled, {"units": "1", "long_name": "1: a stable periodic orbit was found, verified "
+                                                                    "and checked; 0: none within the cap on cycles "
+                                                                    "(the motion is reported as not periodic)"})
+    variables["method"] = (dims, method.astype(str), {"long_name": "newton, marching, none (not periodic), error "
                                                                    "(the FMU rejected the point) or missing"})
+    variables["verdict"] = (dims, verdict.astype(str), {"long_name": "stable (the response is a stable orbit), not "
+                                                                     "periodic, error or missing"})
+    for part, values in (("real", multipliers.real), ("imag", multipliers.imag)):
+        variables[f"multiplier_{part}"] = (dims + ("multiplier",), values,
+                                           {"units": "1", "long_name": f"{part} part of the orbit's Floquet multipliers, "
+                                                                       "by decreasing modulus (NaN: not periodic)"})
     variables["error"] = (dims, error.astype(str), {"long_name": "the FMU's message for a rejected point"})
     differ = directions_differ(data, settled)
     variables["directions_differ"] = (("damper", "omega"), differ.astype(np.int8),
@@ -86,7 +100,46 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
         "fmu": str(model.path),
         "fmu_guid": model.guid,
     }
+    variables.update(unstable_variables(spec, records))
     return xr.Dataset(variables, coords=coords, attrs=attrs)
+
+
+#: Columns of the unstable orbits' table, with units and descriptions.
+UNSTABLE_COLUMNS = {
+    "amplitude": ("m", "amplitude of the main mass on the unstable orbit"),
+    "impacts_per_cycle": ("1", "impacts per forcing cycle on the unstable orbit"),
+    "order": ("1", "period of the unstable orbit in forcing periods"),
+    "max_multiplier": ("1", "largest modulus of its Floquet multipliers (> 1: unstable)"),
+    "multiplier_error": ("1", "accuracy of max_multiplier"),
+    "harvested_power": ("W", "mean harvested power on the unstable orbit"),
+}
+
+
+def unstable_variables(spec: FrequencySpec, records: dict) -> dict:
+    """The unstable orbits met at every point, as variables over an ``unstable`` dimension: where
+    each was met (damper, direction, omega) and what it is. They are never the response; they are
+    what a continuation of the branches builds on."""
+    rows = []
+    for chain, (damper, direction) in enumerate(CHAINS):
+        for frequency in range(len(spec.ratios)):
+            record = records.get(spec.index(chain, frequency)) or {}
+            for orbit in record.get("unstable_orbits") or ():
+                rows.append((damper, direction, float(spec.omegas[frequency]), spec.ratios[frequency], orbit))
+    dims = ("unstable",)
+    variables = {
+        "unstable_damper": (dims, np.array([r[0] for r in rows], dtype=str), {"long_name": "with or without the damper"}),
+        "unstable_direction": (dims, np.array([r[1] for r in rows], dtype=str),
+                               {"long_name": "the sweep that met the orbit"}),
+        "unstable_omega": (dims, np.array([r[2] for r in rows], dtype=float),
+                           {"units": "rad/s", "long_name": "forcing frequency of the unstable orbit"}),
+        "unstable_ratio": (dims, np.array([r[3] for r in rows], dtype=float), {"units": "1", "long_name": "w / sqrt(K/M)"}),
+        "unstable_verdict": (dims, np.array([r[4]["verdict"] for r in rows], dtype=str),
+                             {"long_name": "unstable, or marginal (within its error of 1)"}),
+    }
+    for key, (units, text) in UNSTABLE_COLUMNS.items():
+        variables[f"unstable_{key}"] = (dims, np.array([float(r[4][key]) for r in rows], dtype=float),
+                                        {"units": units, "long_name": text})
+    return variables
 
 
 def directions_differ(data: dict, settled: np.ndarray) -> np.ndarray:
@@ -102,27 +155,37 @@ def directions_differ(data: dict, settled: np.ndarray) -> np.ndarray:
 
 def summarize(ds) -> dict:
     """What a designer asks: the resonant amplitude with and without the damper, the band where
-    the damper lowers it, the best harvested power and where, the jump bands, what did not settle."""
+    the damper lowers it, the best harvested power and where, the jump bands, where the motion is
+    not periodic, and the unstable orbits met. The response at a frequency is its stable orbit or,
+    where none was found, the motion that is not periodic (measured over its window); unstable
+    orbits never count."""
     ratios = ds["ratio"].values
+    verdict = ds["verdict"].values
     settled = ds["settled"].values == 1
-    amplitude = np.where(settled, ds["amplitude"].values, np.nan)
-    power = np.where(settled, ds["harvested_power"].values, np.nan)
+    response = (verdict == "stable") | (verdict == "not periodic")
+    amplitude = np.where(response, ds["amplitude"].values, np.nan)
+    power = np.where(response, ds["harvested_power"].values, np.nan)
     report = {"excitation": ds.attrs["excitation"], "natural_frequency_rad_per_s": ds.attrs["natural_frequency_rad_per_s"],
-              "points": int(ds["amplitude"].size), "not_settled": {}, "resonant_amplitude_m": {},
-              "damper_helps": {}, "best_harvested_power": {}, "jump_bands": {}}
+              "points": int(ds["amplitude"].size), "not_periodic": {}, "resonant_amplitude_m": {},
+              "damper_helps": {}, "best_harvested_power": {}, "jump_bands": {}, "unstable_orbits_met": {}}
     for i, damper in enumerate(DAMPER_CASES):
         report["jump_bands"][damper] = bands(ratios, ds["directions_differ"].values[i] == 1)
         for j, direction in enumerate(DIRECTIONS):
             key = f"{damper} the damper, sweep {direction}"
-            report["not_settled"][key] = [float(r) for r in ratios[~settled[i, j]]]
+            report["not_periodic"][key] = [float(r) for r in ratios[verdict[i, j] == "not periodic"]]
+            met = ((ds["unstable_damper"].values == damper) & (ds["unstable_direction"].values == direction))
+            report["unstable_orbits_met"][key] = {
+                "count": int(met.sum()),
+                "largest_multiplier": float(ds["unstable_max_multiplier"].values[met].max()) if met.any() else None}
             row = amplitude[i, j]
             if np.isfinite(row).any():
                 k = int(np.nanargmax(row))
                 report["resonant_amplitude_m"][key] = {"amplitude_m": float(row[k]), "at_ratio": float(ratios[k]),
-                                                       "transmissibility": float(ds["transmissibility"].values[i, j, k])}
+                                                       "transmissibility": float(ds["transmissibility"].values[i, j, k]),
+                                                       "motion": _motion(settled[i, j, k])}
     for j, direction in enumerate(DIRECTIONS):
-        with np.errstate(invalid="ignore"):
-            helps = amplitude[0, j] < amplitude[1, j]
+        with np.errstate(invalid="ignore"):  # lower beyond rounding: a no-impact orbit is the same with and without
+            helps = amplitude[0, j] < (1.0 - BAND_TOLERANCE) * amplitude[1, j]
         report["damper_helps"][direction] = {
             "bands": bands(ratios, helps),
             "peak_ratio_with_over_without": _ratio(np.nanmax(amplitude[0, j]) if np.isfinite(amplitude[0, j]).any()
@@ -135,8 +198,13 @@ def summarize(ds) -> dict:
             k = int(np.nanargmax(row))
             report["best_harvested_power"][direction] = {"power_W": float(row[k]), "at_ratio": float(ratios[k]),
                                                          "amplitude_m": float(amplitude[0, j, k]),
-                                                         "impacts_per_cycle": float(ds["impacts_per_cycle"].values[0, j, k])}
+                                                         "impacts_per_cycle": float(ds["impacts_per_cycle"].values[0, j, k]),
+                                                         "motion": _motion(settled[0, j, k])}
     return report
+
+
+def _motion(settled: bool) -> str:
+    return "stable orbit" if settled else "not periodic"
 
 
 def _ratio(a, b) -> Optional[float]:
@@ -152,7 +220,7 @@ def summary_lines(report: dict) -> list[str]:
              f"{report['natural_frequency_rad_per_s']:.4g} rad/s; {report['points']} points):"]
     for key, peak in report["resonant_amplitude_m"].items():
         lines.append(f"  peak amplitude {key}: {mm(peak['amplitude_m'])} at w/w_n = {peak['at_ratio']:.4g} "
-                     f"(transmissibility {peak['transmissibility']:.4g})")
+                     f"(transmissibility {peak['transmissibility']:.4g}, {peak['motion']})")
     for direction, helps in report["damper_helps"].items():
         shown = ", ".join(f"{lo:.4g}-{hi:.4g}" for lo, hi in helps["bands"]) or "nowhere"
         ratio = helps["peak_ratio_with_over_without"]
@@ -161,23 +229,39 @@ def summary_lines(report: dict) -> list[str]:
     for direction, best in report["best_harvested_power"].items():
         lines.append(f"  best harvested power (sweep {direction}): {1e3 * best['power_W']:.4g} mW at w/w_n = "
                      f"{best['at_ratio']:.4g} ({best['impacts_per_cycle']:.4g} impacts per cycle, amplitude "
-                     f"{mm(best['amplitude_m'])})")
+                     f"{mm(best['amplitude_m'])}, {best['motion']})")
     for damper, runs in report["jump_bands"].items():
         if runs:
             lines.append(f"  up and down sweeps differ {damper} the damper at w/w_n "
                          + ", ".join(f"{lo:.4g}-{hi:.4g}" for lo, hi in runs))
-    unsettled = {key: values for key, values in report["not_settled"].items() if values}
+    unsettled = {key: values for key, values in report["not_periodic"].items() if values}
     for key, values in unsettled.items():
-        lines.append(f"  not settled within the cap ({key}): {len(values)} points, at w/w_n "
-                     + ", ".join(f"{v:.4g}" for v in values))
+        lines.append(f"  not periodic (no stable orbit within the cap; measured over a window) {key}: "
+                     f"{len(values)} points, at w/w_n " + ", ".join(f"{v:.4g}" for v in values))
+    for key, met in report["unstable_orbits_met"].items():
+        if met["count"]:
+            lines.append(f"  unstable orbits met and set aside {key}: {met['count']} "
+                         f"(largest multiplier {met['largest_multiplier']:.4g})")
     return lines
 
 
 def tidy_frame(ds):
     """One row per point: damper, direction, frequency and every measure."""
-    frame = ds.drop_vars(["directions_differ", "transmissibility_linear"]).to_dataframe().reset_index()
+    extra = [name for name in ds.data_vars if ds[name].dims in (("unstable",), ds["multiplier_real"].dims)]
+    frame = ds.drop_vars(["directions_differ", "transmissibility_linear", *extra]).to_dataframe().reset_index()
     frame["order"] = frame["order"].astype("Int64")
+    for k in range(ds.sizes["multiplier"]):
+        for part in ("real", "imag"):
+            frame[f"multiplier_{k + 1}_{part}"] = ds[f"multiplier_{part}"].isel(multiplier=k).values.ravel()
     return frame
+
+
+def unstable_frame(ds):
+    """One row per unstable orbit met: where, and what it is."""
+    import pandas as pd
+
+    names = [name for name in ds.data_vars if ds[name].dims == ("unstable",)]
+    return pd.DataFrame({name.removeprefix("unstable_"): ds[name].values for name in names})
 
 
 def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
@@ -189,10 +273,12 @@ def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
     ds = build_dataset(run.spec, run.done, model)
     report = summarize(ds)
     rendering = figures.Rendering(curves.frequency_figure_calls(ds, run.folder), jobs)
-    files = [run.folder / "frequency_response.nc", run.folder / "frequency_response.csv", run.folder / "summary.json"]
+    files = [run.folder / "frequency_response.nc", run.folder / "frequency_response.csv", run.folder / "summary.json",
+             run.folder / "unstable_orbits.csv"]
     save_dataset(ds, files[0])
     tidy_frame(ds).to_csv(files[1], index=False)
     files[2].write_text(json.dumps(report, indent=2) + "\n")
+    unstable_frame(ds).to_csv(files[3], index=False)
     return {"dataset": ds, "summary": report, "files": files + rendering.wait()}
 
 

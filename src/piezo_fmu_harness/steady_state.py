@@ -1,18 +1,32 @@
-"""The steady state of the FMU under harmonic base motion at one frequency: shooting and
-verification (the drive, the section state and the measures of an orbit are in
-:mod:`piezo_fmu_harness.drive`).
+"""The steady state of the FMU under harmonic base motion at one frequency: a stable periodic
+orbit, found by shooting and checked for stability, or a motion that is not periodic (the drive,
+the section state and the measures are in :mod:`piezo_fmu_harness.drive`, the Floquet multipliers
+in :mod:`piezo_fmu_harness.stability`).
 
-**Steady state.** Time-marching at ``zeta = 0.0016`` takes minutes of simulated time, so the
-periodic orbit is found by shooting: Newton on ``P^n(x) - x`` (``n`` the order of the orbit:
-1, or a multiple period detected from the marched sections) with finite-difference Jacobians,
-solved by least squares (the impact mass's free drift is a neutral direction when it makes no
-impact) and with a backtracking line search. A vibro-impact map is only piecewise smooth, so
-Newton alternates with blocks of time-marching. An orbit is accepted only after a verification
-run: from ``x`` the section returns within the tolerance after ``n``, ``2n`` and ``3n`` periods.
-Marching alone may also settle (the sections' geometric tail within the tolerance), and is
-verified the same way. When the cap on simulated cycles is reached first, the point is reported
-as not settled, with measures from its last periods. Distances between states are the largest
-of ``|dp|, |dp'|/w, |dq|, |dq'|/w`` (m); the tolerance is relative to ``Y``.
+**Orbits.** Time-marching at ``zeta = 0.0016`` takes minutes of simulated time, so a periodic orbit
+is found by shooting: Newton on ``P^n(x) - x`` (``n`` the order of the orbit: 1, or a multiple
+period detected from the marched sections) with finite-difference Jacobians, solved by least
+squares (the impact mass's free drift is a neutral direction when it makes no impact) and with a
+backtracking line search. A vibro-impact map is only piecewise smooth, so Newton alternates with
+blocks of time-marching. An orbit counts only after a verification run: from ``x`` the section
+returns within the tolerance after ``n``, ``2n`` and ``3n`` periods. Marching alone may also
+settle (the sections' geometric tail within the tolerance), and is verified the same way.
+Distances between states are the largest of ``|dp|, |dp'|/w, |dq|, |dq'|/w`` (m); the tolerance
+is relative to ``Y``.
+
+**Only a stable orbit is the response.** Newton converges to unstable fixed points as readily as
+to stable ones, and a run started exactly on an orbit stays on it for several periods whatever its
+stability. So every verified orbit gets its Floquet multipliers, and only a ``stable`` one is
+reported as the steady state. An unstable orbit is kept (``unstable_orbits`` of the record) and
+the search goes on from it: the drive is started on the orbit displaced along its unstable
+eigenvector by ``ESCAPE_STEP`` of its size, on one side and then the other, and marching and
+Newton look again for a stable orbit of order 1 to ``max_order`` (an orbit already known is not
+examined twice). Each side gets half of the cycles left.
+
+**Not periodic.** When the cap on simulated cycles is reached with no stable orbit, the motion is
+reported as not periodic, with measures over a window of ``window_cycles`` forcing periods marched
+on from where the search stood: the amplitude envelope (the smallest and largest half peak-to-peak
+of one period), the mean power and the impacts per cycle; no single orbit's numbers.
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
@@ -20,13 +34,14 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
 from .drive import HarmonicDrive, measure
 from .fmu import FmuRunError
+from .stability import Floquet, floquet
 
 
 @dataclass(frozen=True)
@@ -40,7 +55,8 @@ class Settings:
     tolerance : float
         Steady-state tolerance on the section's return, relative to the base amplitude ``Y``.
     max_cycles : int
-        Cap on the forcing cycles simulated for one frequency (Newton's evaluations included).
+        Cap on the forcing cycles simulated for one frequency (Newton's evaluations, the
+        stability checks and the search for a stable orbit included).
     newton_iterations : int
         Newton iterations per attempt; 0 finds the steady state by time-marching alone.
     max_order : int
@@ -50,6 +66,8 @@ class Settings:
         chooses the section's phase).
     march_cycles : int
         Forcing cycles marched between Newton attempts.
+    window_cycles : int
+        Forcing cycles over which a motion that is not periodic is measured.
     """
 
     samples: int = 64
@@ -59,32 +77,61 @@ class Settings:
     max_order: int = 4
     warmup_cycles: int = 2
     march_cycles: int = 8
+    window_cycles: int = 60
 
-    #: Newton attempts per frequency (each after a block of marching).
-    NEWTON_ATTEMPTS = 3
-    #: Finite-difference step of the Jacobian, relative to the state's scale.
+    #: Newton attempts per search: at its start, then after 1, 3, 7, ... blocks of marching (a
+    #: transient that decays slowly, as at zeta = 0.0016, gets late attempts near its end).
+    NEWTON_ATTEMPTS = 6
+    #: Finite-difference step of Newton's Jacobian, relative to the state's scale.
     FD_STEP = 1e-7
     #: Returns the verification run checks, in orbits.
     VERIFY_ORBITS = 3
+    #: Displacement of an unstable orbit along its unstable eigenvector, relative to its size.
+    ESCAPE_STEP = 1e-2
+    #: Unstable orbits the search escapes from, at most, per frequency.
+    MAX_ESCAPES = 4
+
+
+@dataclass
+class Orbit:
+    """A verified periodic orbit with its stability and measures."""
+
+    state: np.ndarray
+    phase: float
+    order: int
+    sections: list  # (phase, the orbit's states at that phase), for each section it was seen at
+    return_error: float
+    method: str
+    floquet: Floquet
+    checked_at: tuple  # (state, phase) where the multipliers were computed
+    measures: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """JSON-safe: where the orbit is, its measures and its multipliers."""
+        return {"order": self.order, "state": [float(v) for v in self.state], "phase": float(self.phase),
+                "method": self.method, "return_error": self.return_error, **self.measures, **self.floquet.to_record()}
 
 
 # -- the steady state of one frequency -------------------------------------------------------------
 
 class SteadyState:
-    """Finds, verifies and measures the steady state at one frequency (see the module's text)."""
+    """Finds, verifies, checks and measures the steady state at one frequency (see the module's
+    text)."""
 
     def __init__(self, drive: HarmonicDrive, settings: Settings):
         self.drive, self.settings = drive, settings
         self.tolerance = settings.tolerance * drive.amplitude
         self.newton_iterations_used = 0
+        self.limit = settings.max_cycles  # the cycle count the current search may reach
+        self.unstable: list[Orbit] = []
 
     def _budget_left(self, periods: int) -> bool:
-        return self.drive.cycles + periods <= self.settings.max_cycles
+        return self.drive.cycles + periods <= self.limit
 
-    def period_map(self, x, phase: float, order: int) -> Optional[np.ndarray]:
-        """``P^order(x)``, or ``None`` if the FMU rejects the start ``x`` (outside the gap) or
-        the cap on cycles would be passed."""
-        if not self._budget_left(order):
+    def period_map(self, x, phase: float, order: int, capped: bool = True) -> Optional[np.ndarray]:
+        """``P^order(x)``, or ``None`` if the FMU rejects the start ``x`` (outside the gap) or,
+        when ``capped``, the cap on cycles would be passed."""
+        if capped and not self._budget_left(order):
             return None
         try:
             self.drive.start(x, phase)
@@ -143,26 +190,43 @@ class SteadyState:
 
     def solve(self, x, phase: float) -> dict:
         """The steady state from the guess ``x`` at section phase ``phase``: a JSON-safe record
-        with ``settled``, ``method``, ``order``, the measures, the cycles simulated and the final
-        ``state`` and ``phase`` (the next frequency's guess)."""
+        with ``settled`` (a stable orbit was found), ``method``, ``order``, the measures, the
+        multipliers, the unstable orbits met, the cycles simulated and the final ``state`` and
+        ``phase`` (the next frequency's guess)."""
+        self._start_marching(np.asarray(x, float), phase)
+        found = self._search(self._choose_section())
+        escaped = 0
+        while found is None and escaped < min(len(self.unstable), self.settings.MAX_ESCAPES):
+            found = self._escape(self.unstable[escaped])
+            escaped += 1
+        if found is not None:
+            return self._settled(found)
+        return self._not_periodic()
+
+    def _search(self, history: list) -> Optional[Orbit]:
+        """March from the drive's state (``history``: the sections so far, the drive at the last)
+        with Newton attempts between blocks, until a stable orbit is verified (returned), a new
+        unstable one is (kept; ``None``), or the cycles up to ``self.limit`` are spent (``None``)."""
         drive, settings = self.drive, self.settings
         verify = settings.VERIFY_ORBITS
-        self._start_marching(np.asarray(x, float), phase)
-        history = self._choose_section()
-        attempts = 0
+        attempts, begin = 0, drive.cycles
         while True:
             x, phase = history[-1], drive.phase
-            if settings.newton_iterations > 0 and attempts < settings.NEWTON_ATTEMPTS and drive.clearance(x) > 0:
+            due = drive.cycles - begin >= settings.march_cycles * (2 ** attempts - 1)
+            if (settings.newton_iterations > 0 and attempts < settings.NEWTON_ATTEMPTS and due
+                    and drive.clearance(x) > 0):
                 attempts += 1
                 saved = drive.save()
                 try:
                     for order in self._orders(history):
                         candidate, converged = self.newton(x, phase, order)
-                        if converged and self._budget_left(verify * order):
+                        if converged and not self._known(candidate, phase) and self._budget_left(verify * order):
                             drive.start(candidate, phase)
-                            period, error = self.returns(candidate, drive.advance(verify * order), order)
+                            sections = drive.advance(verify * order)
+                            period, error = self.returns(candidate, sections, order)
                             if period is not None:
-                                return self._settled(candidate, phase, period, error, "newton")
+                                orbit = self._examine(candidate, phase, period, sections, error, "newton")
+                                return orbit if orbit.floquet.stable else None
                     drive.restore(saved)
                 finally:
                     drive.release(saved)
@@ -171,15 +235,76 @@ class SteadyState:
                 # Verified by marching on: the next orbits must return within the tolerance.
                 sections = drive.advance(verify * order)
                 period, error = self.returns(x, sections, order)
-                if period is not None:
-                    return self._settled(x, phase, period, error, "marching")
+                if period is not None and not self._known(x, phase):
+                    orbit = self._examine(x, phase, period, sections, error, "marching")
+                    return orbit if orbit.floquet.stable else None
                 history += sections
                 continue
-            block = min(settings.march_cycles, settings.max_cycles - drive.cycles)
+            block = min(settings.march_cycles, self.limit - drive.cycles)
             if block <= 0:
-                break
+                return None
             history += drive.advance(block)
-        return self._not_settled()
+
+    def _examine(self, x, phase: float, period: int, sections: list, error: float, method: str) -> Orbit:
+        """Measure the verified orbit through ``x`` (the drive stands at one of its sections) and
+        compute its multipliers. An orbit that is not stable is kept in ``self.unstable``.
+
+        The FMU starts only with the impact mass inside the gap, so when it is in contact at ``x``
+        (chatter) the multipliers are computed at the phase of the orbit where it is farthest from
+        the barriers: they do not depend on the section."""
+        drive = self.drive
+        measures = measure(drive, 2 * period)
+        views = [(phase, [np.asarray(v) for v in sections[:period]])]
+        at, at_phase = np.array(x, float), phase
+        if drive.clearance(at) <= 0:
+            record: list = []
+            drive.advance(period, record=record)
+            k = int(np.argmax([drive.clearance(state) for state in record]))
+            step = (k + 1) % drive.samples
+            at, at_phase = np.array(record[k]), (phase + 2.0 * math.pi * step / drive.samples) % (2.0 * math.pi)
+            views.append((at_phase, [np.array(record[(k + j * drive.samples) % len(record)]) for j in range(period)]))
+        result = None
+        if drive.clearance(at) > 0:
+            size = max(drive.amplitude, float(np.max(np.abs(at * drive.scale))))
+            result = floquet(lambda z: self.period_map(z, at_phase, period, capped=False), at, drive.scale, size,
+                             neutral=measures["impacts_per_cycle"] == 0)
+        orbit = Orbit(np.array(x, float), phase, period, views, error, method, result or Floquet.unchecked(),
+                      (at, at_phase), measures)
+        if not orbit.floquet.stable:
+            self.unstable.append(orbit)
+        return orbit
+
+    def _known(self, x, phase: float) -> bool:
+        """``x`` lies on an orbit met before that is not stable (seen at the same section phase)."""
+        return any(seen == phase and min(self.drive.distance(x, s) for s in states) <= 10 * self.tolerance
+                   for orbit in self.unstable for seen, states in orbit.sections)
+
+    def _escape(self, orbit: Orbit) -> Optional[Orbit]:
+        """Search on from ``orbit`` displaced along its unstable eigenvector, on one side and then
+        the other; each side may spend half of the cycles left."""
+        drive = self.drive
+        state, phase = orbit.checked_at
+        if not np.any(orbit.floquet.vector):
+            return None  # its multipliers could not be computed: no direction to leave it by
+        size = max(drive.amplitude, float(np.max(np.abs(state * drive.scale))))
+        vector = orbit.floquet.vector / float(np.max(np.abs(orbit.floquet.vector * drive.scale)))
+        for sign in (1.0, -1.0):
+            start = state + sign * self.settings.ESCAPE_STEP * size * vector
+            left = self.settings.max_cycles - drive.cycles
+            if left <= 0:
+                break
+            if drive.clearance(start) <= 0:
+                continue
+            self.limit = drive.cycles + (left // 2 if sign > 0 else left)
+            try:
+                drive.start(start, phase)
+            except FmuRunError:
+                continue
+            found = self._search([start])
+            if found is not None:
+                return found
+        self.limit = self.settings.max_cycles
+        return None
 
     # -- pieces of solve ---------------------------------------------------------------------------
 
@@ -244,21 +369,23 @@ class SteadyState:
                 return order
         return None
 
-    def _settled(self, x, phase: float, period: int, error: float, method: str) -> dict:
-        # The verification left the drive at a section of the orbit, more than one orbit after its
-        # start: the circuit has settled; two orbits are measured.
-        bookkeeping = self._bookkeeping(x, phase)
-        return {"settled": True, "method": method, "order": period, "return_error": error,
-                **measure(self.drive, 2 * period), **bookkeeping}
+    def _settled(self, orbit: Orbit) -> dict:
+        return {"settled": True, **orbit.record(), **self._bookkeeping(orbit.state, orbit.phase)}
 
-    def _not_settled(self) -> dict:
+    def _not_periodic(self) -> dict:
+        """No stable orbit within the cap: the motion measured over a long window from where the
+        search stands (the cycles of the window come on top of ``cycles``)."""
         drive = self.drive
-        bookkeeping = self._bookkeeping(drive.state(), drive.phase)
-        return {"settled": False, "method": "none", "order": None, "return_error": None,
-                **measure(drive, 2), **bookkeeping}
+        x, phase = drive.state(), drive.phase
+        bookkeeping = self._bookkeeping(x, phase)
+        measures = measure(drive, self.settings.window_cycles)
+        return {"settled": False, "method": "none", "order": None, "return_error": None, "verdict": "not periodic",
+                "stable": False, **measures, **bookkeeping, "state": [float(v) for v in drive.state()],
+                "phase": float(drive.phase)}
 
     def _bookkeeping(self, x, phase: float) -> dict:
-        """The cycles spent finding and verifying the steady state (the measured ones come on top)
-        and where it stands: the next frequency's guess."""
+        """The cycles spent finding, checking and verifying the steady state (the measured ones come
+        on top), the unstable orbits met, and where it stands: the next frequency's guess."""
         return {"cycles": self.drive.cycles, "newton_iterations": self.newton_iterations_used,
+                "unstable_orbits": [orbit.record() for orbit in self.unstable],
                 "state": [float(v) for v in x], "phase": float(phase)}
