@@ -65,7 +65,10 @@ MEASURES = {
     "harvested_power": ("W", "mean power into both loads in steady state (harvested_energy / time)"),
     "mean_displacement": ("m", "mean of p over the steady-state orbit"),
     "return_error": ("m", "largest return distance of the verified section (settled points)"),
-    "cycles": ("1", "forcing cycles simulated to find and verify the steady state"),
+    "cycles": ("1", "forcing cycles simulated to find, verify, measure and check the orbits (the window of a motion "
+                    "that is not periodic comes on top)"),
+    "stability_cycles": ("1", "of those, the cycles of the stability checks (Floquet multipliers)"),
+    "escape_cycles": ("1", "of those, the cycles of the search on from unstable orbits"),
     "newton_iterations": ("1", "Newton iterations spent"),
     "order": ("1", "period of the orbit in forcing periods (0: not periodic)"),
     "max_multiplier": ("1", "largest modulus of the orbit's Floquet multipliers, the free impact mass's neutral pair "

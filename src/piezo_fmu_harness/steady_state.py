@@ -124,6 +124,8 @@ class SteadyState:
         self.newton_iterations_used = 0
         self.limit = settings.max_cycles  # the cycle count the current search may reach
         self.unstable: list[Orbit] = []
+        self.stability_cycles = 0  # cycles spent on the multipliers
+        self.escape_cycles = 0  # cycles spent searching on from unstable orbits
 
     def _budget_left(self, periods: int) -> bool:
         return self.drive.cycles + periods <= self.limit
@@ -195,10 +197,11 @@ class SteadyState:
         ``phase`` (the next frequency's guess)."""
         self._start_marching(np.asarray(x, float), phase)
         found = self._search(self._choose_section())
-        escaped = 0
+        escaped, begin = 0, self.drive.cycles
         while found is None and escaped < min(len(self.unstable), self.settings.MAX_ESCAPES):
             found = self._escape(self.unstable[escaped])
             escaped += 1
+        self.escape_cycles = self.drive.cycles - begin
         if found is not None:
             return self._settled(found)
         return self._not_periodic()
@@ -263,11 +266,12 @@ class SteadyState:
             step = (k + 1) % drive.samples
             at, at_phase = np.array(record[k]), (phase + 2.0 * math.pi * step / drive.samples) % (2.0 * math.pi)
             views.append((at_phase, [np.array(record[(k + j * drive.samples) % len(record)]) for j in range(period)]))
-        result = None
+        result, begin = None, drive.cycles
         if drive.clearance(at) > 0:
             size = max(drive.amplitude, float(np.max(np.abs(at * drive.scale))))
             result = floquet(lambda z: self.period_map(z, at_phase, period, capped=False), at, drive.scale, size,
                              neutral=measures["impacts_per_cycle"] == 0)
+        self.stability_cycles += drive.cycles - begin
         orbit = Orbit(np.array(x, float), phase, period, views, error, method, result or Floquet.unchecked(),
                       (at, at_phase), measures)
         if not orbit.floquet.stable:
@@ -376,16 +380,16 @@ class SteadyState:
         """No stable orbit within the cap: the motion measured over a long window from where the
         search stands (the cycles of the window come on top of ``cycles``)."""
         drive = self.drive
-        x, phase = drive.state(), drive.phase
-        bookkeeping = self._bookkeeping(x, phase)
+        bookkeeping = self._bookkeeping(drive.state(), drive.phase)
         measures = measure(drive, self.settings.window_cycles)
+        bookkeeping.update(state=[float(v) for v in drive.state()], phase=float(drive.phase))  # after the window
         return {"settled": False, "method": "none", "order": None, "return_error": None, "verdict": "not periodic",
-                "stable": False, **measures, **bookkeeping, "state": [float(v) for v in drive.state()],
-                "phase": float(drive.phase)}
+                "stable": False, **measures, **bookkeeping}
 
     def _bookkeeping(self, x, phase: float) -> dict:
         """The cycles spent finding, checking and verifying the steady state (the measured ones come
         on top), the unstable orbits met, and where it stands: the next frequency's guess."""
         return {"cycles": self.drive.cycles, "newton_iterations": self.newton_iterations_used,
+                "stability_cycles": self.stability_cycles, "escape_cycles": self.escape_cycles,
                 "unstable_orbits": [orbit.record() for orbit in self.unstable],
                 "state": [float(v) for v in x], "phase": float(phase)}
