@@ -20,7 +20,6 @@ from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.analysis import open_dataset
 from piezo_fmu_harness.drive import HarmonicDrive
-from piezo_fmu_harness.fmu import FmuModel, Instance
 from piezo_fmu_harness.frequency_response import linear_transmissibility, solve_point
 from piezo_fmu_harness.steady_state import Settings
 
@@ -33,14 +32,6 @@ NATURAL = math.sqrt(K / M)
 IMPACT_COUNT = 4
 IMPACT_STUDY = ("frequency-response", "--set", "C_eq=100", "--amplitude", 4e-3, "--ratio-min", 0.5, "--ratio-max",
                 0.725, "--count", IMPACT_COUNT, "--max-cycles", 150, "--jobs", 2, "--fmu", FMU, "--no-progress")
-
-
-@pytest.fixture(scope="module")
-def instance():
-    model = FmuModel(FMU)
-    unzipdir = model.extract()
-    yield Instance(model, unzipdir)
-    shutil.rmtree(unzipdir, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")

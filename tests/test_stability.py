@@ -12,7 +12,6 @@ from __future__ import annotations
 import cmath
 import json
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,6 @@ from fmu_host import run_cli
 
 from piezo_fmu_harness.analysis import open_dataset
 from piezo_fmu_harness.drive import HarmonicDrive
-from piezo_fmu_harness.fmu import FmuModel, Instance
 from piezo_fmu_harness.frequency_response import rest_state, solve_point
 from piezo_fmu_harness.steady_state import Settings
 
@@ -35,14 +33,6 @@ NOMINAL = {"voltage_model": 1}  # the frequency response's default damper
 #: A reduced band of the default frequency response (Y = 1 mm, the nominal damper): stable two-impact
 #: orbits, their jumps, and the two-impact orbits that lose stability through a complex pair.
 BAND = ("--ratio-min", 1.1, "--ratio-max", 1.35, "--count", 11)
-
-
-@pytest.fixture(scope="module")
-def instance():
-    model = FmuModel(FMU)
-    unzipdir = model.extract()
-    yield Instance(model, unzipdir)
-    shutil.rmtree(unzipdir, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
