@@ -3,8 +3,12 @@
     python benchmarks/bench_forced.py [--jobs N] [--out DIR]
 
 1. The default frequency response: 61 frequencies from 0.5 to 2 sqrt(K/M), Y = 1 mm, with and
-   without the damper, up and down (244 points, each a verified steady state), on the process pool
-   of ``--jobs`` workers, worker start-up included; then its files and figures, timed apart.
+   without the damper, up and down (244 points, each a stable orbit or a motion that is not
+   periodic), on the process pool of ``--jobs`` workers, worker start-up included; then its files
+   and figures, timed apart. The forcing cycles simulated are split into the shooting (marching,
+   Newton, verification, measures), the stability checks (Floquet multipliers), the search on
+   from unstable orbits and the windows of the motions that are not periodic: the cost of issue
+   20's checks against the shooting alone, in the same run.
 2. The free-decay sweep of the Figs. 4-9 preset (1922 points of 2 s) on the same pool: the
    points per second of each.
 3. One optimisation with the defaults of ``piezo-fmu optimize``: the paper's perfectibility over
@@ -64,7 +68,16 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
         mine = [r for r in records if r["index"] // len(spec.ratios) == chain]
         chains[f"{damper}, {direction}"] = {"cpu_s": sum(r["cpu_seconds"] for r in mine),
                                            "not_settled": sum(not r["settled"] for r in mine)}
+    window = spec.settings.window_cycles
+    cycles = {"all": sum(r["cycles"] + (0 if r["settled"] else window) for r in records),
+              "stability": sum(r["stability_cycles"] for r in records),
+              "search": sum(r["escape_cycles"] for r in records),
+              "window": sum(window for r in records if not r["settled"])}
+    cycles["shooting"] = cycles["all"] - cycles["stability"] - cycles["search"] - cycles["window"]
+    escaping = [r for r in records if r["unstable_orbits"]]
     return {"points": len(records), "wall_s": simulation_s, "points_per_s": len(records) / simulation_s,
+            "cycles": cycles, "points_with_unstable_orbits": len(escaping),
+            "their_cpu_s": sum(r["cpu_seconds"] for r in escaping),
             "worker_cpu_s": sum(r["cpu_seconds"] for r in records), "outputs_s": outputs_s,
             "point_cpu_s_median": statistics.median(r["cpu_seconds"] for r in records),
             "cycles_median": statistics.median(r.get("cycles") or 0 for r in records),
@@ -132,7 +145,14 @@ def main() -> None:
           f"{forced['point_cpu_s_median']:.3f} s CPU, {forced['cycles_median']:g} forcing cycles); files and figures "
           f"{forced['outputs_s']:.2f} s more")
     for name, chain in forced["chains"].items():
-        print(f"  chain {name:14s} {chain['cpu_s']:6.1f} s CPU, {chain['not_settled']} points not settled")
+        print(f"  chain {name:14s} {chain['cpu_s']:6.1f} s CPU, {chain['not_settled']} points not periodic")
+    cycles = forced["cycles"]
+    print(f"  forcing cycles simulated: {cycles['all']}; shooting (march, Newton, verification, measures) "
+          f"{cycles['shooting']}; stability checks {cycles['stability']} = {cycles['stability'] / cycles['shooting']:.2f}"
+          f" x the shooting; search on from unstable orbits {cycles['search']} = "
+          f"{cycles['search'] / cycles['shooting']:.2f} x; windows of the motions not periodic {cycles['window']}")
+    print(f"  {forced['points_with_unstable_orbits']} points met unstable orbits: {forced['their_cpu_s']:.1f} s of the "
+          f"{forced['worker_cpu_s']:.1f} s CPU")
     print(f"free-decay sweep    {decay['points']} points in {decay['wall_s']:.1f} s wall = {decay['points_per_s']:.1f} "
           f"points/s ({decay['worker_cpu_s']:.1f} s CPU): {report['free_decay_points_per_forced_point']:.0f} free-decay "
           "points for the time of one steady state")
