@@ -15,7 +15,10 @@ damper) unless given:
   with the damper): terms ``amplitude``, the peak steady-state amplitude over the band with the
   damper over the same peak without it (to be small), ``transmissibility``, the peak amplitude over
   ``Y`` (to be small), and ``power``, the mean harvested power over the band over the reference
-  design's (to be large). ``J = w_a amplitude + w_t transmissibility - w_p power``.
+  design's (to be large). ``J = w_a amplitude + w_t transmissibility - w_p power``. The response
+  at each frequency is the stable one: a stable orbit or, where none is found, the motion that is
+  not periodic, measured over its window (its amplitude the envelope's top); an unstable orbit
+  never scores.
 
 A weight may be negative (it turns what its term rewards around) or zero (the term is not
 computed when that saves work).
