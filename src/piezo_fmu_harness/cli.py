@@ -184,6 +184,34 @@ def _parser() -> argparse.ArgumentParser:
     results_folder(frequency, "frequency-response")
     engine(frequency)
 
+    from . import continuation_study as cs
+
+    continuation = commands.add_parser(
+        "continuation", help="branches of periodic orbits followed through their folds, with their bifurcations",
+        description="Seed with a sweep up and down (the frequency response's shooting, with the damper), then follow "
+                    "every orbit with impacts by pseudo-arclength continuation in the frequency ratio (or Y, or a "
+                    "damper parameter), through folds, naming the bifurcations (fold, period doubling, "
+                    "Neimark-Sacker, grazing). Writes continuation.nc, branches.csv, events.csv, summary.json and "
+                    "continuation.png.")
+    continuation.add_argument("--parameter", default="ratio", metavar="NAME",
+                              help="the continued parameter: ratio (default), Y, or a Real damper parameter")
+    continuation.add_argument("--range", default=None, metavar="LO:HI", help="its range (not for ratio)")
+    continuation.add_argument("--ratio", type=float, default=1.0, metavar="R",
+                              help="w / sqrt(K/M) held fixed when the parameter is not the ratio (default 1)")
+    continuation.add_argument("--max-points", type=int, default=Settings_default("max_points"), metavar="N",
+                              help="points a branch may have in each direction (default %(default)s)")
+    continuation.add_argument("--max-branches", type=int, default=cs.MAX_BRANCHES, metavar="N",
+                              help="branches followed at most (default %(default)s)")
+    band_options(continuation, cs.SEED_DEFAULTS)
+    model_options(continuation)
+    results_folder(continuation, "continuation")
+    jobs(continuation)
+    where = continuation.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
+    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
+    continuation.add_argument("--force", action="store_true", help="replace the results in --out")
+    continuation.add_argument("--no-progress", action="store_true", help="(no progress bar is drawn)")
+
     from . import optimize as opt
 
     optimizer = commands.add_parser(
@@ -227,6 +255,18 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def Settings_default(name: str):
+    from .continuation import Settings
+
+    return getattr(Settings(), name)
+
+
+def _continuation(args) -> int:
+    from . import continuation_study
+
+    return continuation_study.command(args)
+
+
 def main(argv: Optional[list[str]] = None) -> int:
     """Run the CLI; return the exit status (0 done, 2 bad input, 130 interrupted)."""
     parser = _parser()
@@ -241,7 +281,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         return {"nominal": commands.nominal, "sweep": commands.sweep, "two-designs": commands.two_designs,
                 "load-sweep": commands_load.load_sweep, "impact-voltage": commands_load.impact_voltage,
                 "frequency-response": commands_forced.frequency_response,
-                "optimize": commands_forced.optimize}[args.command](args)
+                "optimize": commands_forced.optimize, "continuation": _continuation}[args.command](args)
     except UsageError as error:
         print(f"{PROG} {args.command}: error: {error}", file=sys.stderr)
         return 2
