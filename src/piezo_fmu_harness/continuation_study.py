@@ -170,8 +170,22 @@ def build_dataset(study: Continuation, parameter_units: str):
     variables["event_amplitude"] = (("event",), np.array([e["amplitude"] for e in events], dtype=float),
                                     {"units": "m", "long_name": "the branch's amplitude there"})
     crossing = np.array([complex(*e["multiplier"]) if e["multiplier"] else complex(np.nan, np.nan) for e in events])
-    variables["event_multiplier_real"] = (("event",), crossing.real, {"units": "1"})
+    variables["event_multiplier_real"] = (("event",), crossing.real,
+                                          {"units": "1", "long_name": "the multiplier of the crossing, real part"})
     variables["event_multiplier_imag"] = (("event",), crossing.imag, {"units": "1"})
+    for flag, text in (("crosses_plus_one", "a real multiplier crosses +1 between the two points"),
+                       ("crosses_minus_one", "a real multiplier crosses -1 between the two points")):
+        variables[f"event_{flag}"] = (("event",), np.array([int(e.get(flag, False)) for e in events], dtype=np.int8),
+                                      {"units": "1", "long_name": text})
+    variables["event_stability_changes"] = (("event",), np.array([int(e["stable_before"] != e["stable_after"])
+                                                                  for e in events], dtype=np.int8),
+                                            {"units": "1", "long_name": "1: stable on one side, unstable on the other"})
+    variables["event_from"] = (("event",), np.array([e["ratio_between"][0] if "ratio_between" in e else e["lam"]
+                                                     for e in events], dtype=float),
+                               {"units": parameter_units, "long_name": "the parameter at the point before"})
+    variables["event_to"] = (("event",), np.array([e["ratio_between"][1] if "ratio_between" in e else e["lam"]
+                                                   for e in events], dtype=float),
+                             {"units": parameter_units, "long_name": "the parameter at the point after"})
     attrs = {"title": "piezo-impact damper: branches of periodic orbits (pseudo-arclength continuation)",
              "parameter": study.problem.parameter, "problem": json.dumps(asdict(study.problem)),
              "settings": json.dumps(asdict(study.settings))}

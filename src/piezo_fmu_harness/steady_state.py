@@ -112,11 +112,9 @@ class Orbit:
                 "method": self.method, "return_error": self.return_error, **self.measures, **self.floquet.to_record()}
 
 
-# -- the steady state of one frequency -------------------------------------------------------------
-
-class SteadyState:
-    """Finds, verifies, checks and measures the steady state at one frequency (see the module's
-    text)."""
+class Shooting:
+    """Finding periodic orbits at one frequency: the period map, Newton on ``P^n(x) - x``, the
+    returns of marched sections and the section's phase (see the module's text)."""
 
     def __init__(self, drive: HarmonicDrive, settings: Settings):
         self.drive, self.settings = drive, settings
@@ -189,6 +187,74 @@ class SteadyState:
             if worst <= self.tolerance:
                 return period, worst
         return None, min(distances)
+
+    def _start_marching(self, x, phase: float) -> None:
+        """Start the drive from ``x``; a guess with the impact mass outside the gap (a previous
+        frequency's state in contact) is moved onto the nearer barrier first."""
+        if self.drive.clearance(x) < 0:
+            x = x.copy()
+            x[2] = x[0] + math.copysign(0.5 * self.drive.gap, x[2] - x[0])
+            x[3] = x[1]
+        self.drive.start(x, phase)
+
+    def _choose_section(self) -> list[np.ndarray]:
+        """March the first periods, then move the section to the phase of the last period where
+        the impact mass is farthest from the barriers, unless it already is at least half that
+        far. Returns the sections marched at the final phase (the drive stands at the last)."""
+        drive, settings = self.drive, self.settings
+        history = [drive.state()]
+        history += drive.advance(max(0, min(settings.warmup_cycles, settings.max_cycles) - 1))
+        record: list = []
+        history += drive.advance(1, record=record)
+        clearances = [drive.clearance(state) for state in record]
+        best = int(np.argmax(clearances))
+        if clearances[-1] > 0 and clearances[-1] >= 0.5 * clearances[best]:
+            return history
+        phase = (drive.phase + 2.0 * math.pi * (best + 1) / drive.samples) % (2.0 * math.pi)
+        state = np.array(record[best])
+        drive.start(state, phase)
+        return [state]
+
+    def _orders(self, history: list) -> list[int]:
+        """Orders for Newton to try: 1, then the order the marched sections suggest."""
+        suggested = self._suggested_order(history)
+        return [1] if suggested == 1 else [1, suggested]
+
+    def _suggested_order(self, history: list) -> int:
+        """The ``n`` <= max_order whose return ``|x_k - x_{k-n}|`` is smallest over the last sections."""
+        drive, top = self.drive, self.settings.max_order
+        if len(history) < top + 1:
+            return 1
+        gaps = [drive.distance(history[-1], history[-1 - n]) for n in range(1, top + 1)]
+        best = int(np.argmin(gaps)) + 1
+        return best if gaps[best - 1] < 0.1 * gaps[0] else 1
+
+    def _marched_order(self, history: list) -> Optional[int]:
+        """The order at which the marched sections have converged: their geometric tail, estimated
+        from the returns over the last orbits, is within the tolerance. ``None`` if none has."""
+        drive = self.drive
+        for order in range(1, self.settings.max_order + 1):
+            span = 4 * order
+            if len(history) < span + order:
+                break
+            returns = [drive.distance(history[k], history[k - order])
+                       for k in range(len(history) - span, len(history))]
+            first, last = returns[0], returns[-1]
+            if last == 0.0:
+                return order
+            if first <= 0.0 or last >= first:
+                continue
+            ratio = (last / first) ** (1.0 / (len(returns) - 1))
+            if last * ratio / (1.0 - ratio) + last <= self.tolerance:
+                return order
+        return None
+
+
+# -- the steady state of one frequency -------------------------------------------------------------
+
+class SteadyState(Shooting):
+    """Finds, verifies, checks and measures the steady state at one frequency (see the module's
+    text)."""
 
     def solve(self, x, phase: float) -> dict:
         """The steady state from the guess ``x`` at section phase ``phase``: a JSON-safe record
@@ -308,69 +374,6 @@ class SteadyState:
             if found is not None:
                 return found
         self.limit = self.settings.max_cycles
-        return None
-
-    # -- pieces of solve ---------------------------------------------------------------------------
-
-    def _start_marching(self, x, phase: float) -> None:
-        """Start the drive from ``x``; a guess with the impact mass outside the gap (a previous
-        frequency's state in contact) is moved onto the nearer barrier first."""
-        if self.drive.clearance(x) < 0:
-            x = x.copy()
-            x[2] = x[0] + math.copysign(0.5 * self.drive.gap, x[2] - x[0])
-            x[3] = x[1]
-        self.drive.start(x, phase)
-
-    def _choose_section(self) -> list[np.ndarray]:
-        """March the first periods, then move the section to the phase of the last period where
-        the impact mass is farthest from the barriers, unless it already is at least half that
-        far. Returns the sections marched at the final phase (the drive stands at the last)."""
-        drive, settings = self.drive, self.settings
-        history = [drive.state()]
-        history += drive.advance(max(0, min(settings.warmup_cycles, settings.max_cycles) - 1))
-        record: list = []
-        history += drive.advance(1, record=record)
-        clearances = [drive.clearance(state) for state in record]
-        best = int(np.argmax(clearances))
-        if clearances[-1] > 0 and clearances[-1] >= 0.5 * clearances[best]:
-            return history
-        phase = (drive.phase + 2.0 * math.pi * (best + 1) / drive.samples) % (2.0 * math.pi)
-        state = np.array(record[best])
-        drive.start(state, phase)
-        return [state]
-
-    def _orders(self, history: list) -> list[int]:
-        """Orders for Newton to try: 1, then the order the marched sections suggest."""
-        suggested = self._suggested_order(history)
-        return [1] if suggested == 1 else [1, suggested]
-
-    def _suggested_order(self, history: list) -> int:
-        """The ``n`` <= max_order whose return ``|x_k - x_{k-n}|`` is smallest over the last sections."""
-        drive, top = self.drive, self.settings.max_order
-        if len(history) < top + 1:
-            return 1
-        gaps = [drive.distance(history[-1], history[-1 - n]) for n in range(1, top + 1)]
-        best = int(np.argmin(gaps)) + 1
-        return best if gaps[best - 1] < 0.1 * gaps[0] else 1
-
-    def _marched_order(self, history: list) -> Optional[int]:
-        """The order at which the marched sections have converged: their geometric tail, estimated
-        from the returns over the last orbits, is within the tolerance. ``None`` if none has."""
-        drive = self.drive
-        for order in range(1, self.settings.max_order + 1):
-            span = 4 * order
-            if len(history) < span + order:
-                break
-            returns = [drive.distance(history[k], history[k - order])
-                       for k in range(len(history) - span, len(history))]
-            first, last = returns[0], returns[-1]
-            if last == 0.0:
-                return order
-            if first <= 0.0 or last >= first:
-                continue
-            ratio = (last / first) ** (1.0 / (len(returns) - 1))
-            if last * ratio / (1.0 - ratio) + last <= self.tolerance:
-                return order
         return None
 
     def _settled(self, orbit: Orbit) -> dict:
