@@ -15,6 +15,9 @@
    ``m`` (0.02 to 0.2 kg) and ``d`` (3 to 10 mm), differential evolution (15 x 2 designs a
    generation, at most 30 generations) on the same pool, then the grid of the same budget and the
    sensitivity: its evaluations and wall time.
+4. The default ``piezo-fmu continuation`` (seeds from 16 frequencies up and down, every orbit with
+   impacts followed; target under 60 s on 2 cores): wall time, points, runs of the period map per
+   point.
 
 Wall and CPU times (the CPU time of the workers, each timing its own points). The load average
 before the run is printed: other programs on the cores slow the wall times.
@@ -115,6 +118,21 @@ def optimisation(model: FmuModel, out: Path, jobs: int) -> dict:
             "grid_best": report["grid"]["best"]["objective"], "report_wall_s": report["wall_s"]}
 
 
+def continuation(model: FmuModel, out: Path, jobs: int) -> dict:
+    """The default ``piezo-fmu continuation``: its wall time, points and runs of the period map."""
+    begin = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        status = cli.main(["continuation", "--jobs", str(jobs), "--out", str(out), "--force",
+                           "--fmu", str(model.path)])
+    wall = time.perf_counter() - begin
+    if status != 0:
+        raise SystemExit(f"continuation failed with status {status}")
+    summary = json.loads((out / "summary.json").read_text())
+    return {"wall_s": wall, "branches": summary["branches"], "points": summary["points"],
+            "evaluations": summary["evaluations"], "evaluations_per_point": summary["evaluations"] / summary["points"],
+            "seconds": summary["seconds"], "events": {k: len(v) for k, v in summary["events"].items()}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes")
@@ -130,11 +148,12 @@ def main() -> None:
         forced = frequency_response(model, out / "frequency-response", args.jobs)
         decay = free_decay(model, out / "figs4-9", args.jobs)
         optimum = optimisation(model, out / "optimize", args.jobs)
+        branches = continuation(model, out / "continuation", args.jobs)
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
     report = {"jobs": args.jobs, "cores": os.cpu_count(), "load_average_before": [round(x, 2) for x in load_before],
-              "frequency_response": forced, "free_decay_sweep": decay, "optimisation": optimum,
+              "frequency_response": forced, "free_decay_sweep": decay, "optimisation": optimum, "continuation": branches,
               "free_decay_points_per_forced_point": decay["points_per_s"] / forced["points_per_s"]}
     if args.out is not None:
         (out / "bench_forced.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -162,6 +181,10 @@ def main() -> None:
           f"{optimum['grid']['evaluations']} points; whole command (reference, search, grid, sensitivity, report) "
           f"{optimum['command_wall_s']:.1f} s")
     print(f"  optimum {optimum['optimum']}: J = {optimum['objective']:.4g}; grid best J = {optimum['grid_best']:.4g}")
+    print(f"continuation        default (16 seeds a sweep, 0.5-2 w_n): {branches['wall_s']:.1f} s wall (target < 60 s; "
+          f"seeds {branches['seconds']['seeds']:.1f} s, branches {branches['seconds']['branches']:.1f} s), "
+          f"{branches['branches']} branches, {branches['points']} points, {branches['evaluations']} runs of the period "
+          f"map = {branches['evaluations_per_point']:.1f} a point; events {branches['events']}")
     print("\n".join(frequency_results.summary_lines(forced["summary"])))
 
 
