@@ -16,7 +16,7 @@ oriented along the branch), the predictor is ``u_k + ds t_k``; the corrector is 
 ``G(u) = 0, t_k . (u - u_pred) = 0`` with ``DG`` of ``u_k`` (a chord method). At the new point
 ``DG`` is taken by forward differences from the corrector's last residual (five runs of ``P^n``;
 central differences at a seed): its ``G_z + I`` is the Jacobian of the period map, whose
-eigenvalues are the Floquet multipliers, and its null vector is the next tangent. The step grows by 1.3 after an easy correction and halves after a failed one.
+eigenvalues are the Floquet multipliers, and its null vector is the next tangent. The step grows by 1.5 after an easy correction and halves after a failed one.
 
 **Watching the multipliers.** Between two points the continuation names what changed:
 
@@ -105,10 +105,10 @@ class Settings:
 
     step: float = 0.05            # first arclength step (the state in units of Y)
     min_step: float = 1e-4
-    max_step: float = 0.5
+    max_step: float = 1.0
     max_points: int = 150         # points a direction, at most
     corrector_iterations: int = 8
-    max_multiplier: float = 50.0  # a branch stops where a disturbance grows this much per orbit
+    max_multiplier: float = 25.0  # a branch stops where a disturbance grows this much per orbit
     doubling_depth: int = 1       # period doublings followed from one seed
 
 
@@ -181,9 +181,14 @@ class Tracer:
     def split(self, u) -> tuple[np.ndarray, float]:
         return u[:4] / self.S, float(u[4] * self.problem.scale)
 
-    def residual(self, u) -> Optional[np.ndarray]:
+    def residual(self, u, run: Optional[dict] = None) -> Optional[np.ndarray]:
+        """``G(u)`` (scaled); with ``run`` (a dict), the run's step-by-step states and impact count
+        go into it, for :meth:`measure`."""
         x, lam = self.split(u)
-        image = self.map(x, lam)
+        record = [] if run is not None else None
+        image = self.map(x, lam, record=record)
+        if run is not None and image is not None:
+            run.update(states=record, count=self.map.drive(lam).totals()[0])
         return None if image is None else (image - x) * self.S
 
     def derivative(self, u, base: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
@@ -212,28 +217,31 @@ class Tracer:
     # -- points ------------------------------------------------------------------------------------
 
     def point(self, u, iterations: int, previous: Optional[np.ndarray],
-              base: Optional[np.ndarray] = None) -> Optional[Point]:
-        """The converged point ``u`` (residual ``base`` there, if known) with its Jacobian,
-        tangent (oriented like ``previous``), multipliers and measures."""
+              base: Optional[np.ndarray] = None, run: Optional[dict] = None) -> Optional[Point]:
+        """The converged point ``u`` (residual ``base`` there and its ``run``, if known) with its
+        Jacobian, tangent (oriented like ``previous``), multipliers and measures."""
+        x, lam = self.split(u)
+        measures = self.measure(x, lam, run)
         jac = self.derivative(u, base)
         if jac is None:
             return None
         tangent = np.linalg.svd(jac)[2][-1]
         if previous is not None and float(tangent @ previous) < 0:
             tangent = -tangent
-        x, lam = self.split(u)
         multipliers = np.linalg.eigvals(jac[:, :4] + np.eye(4))
         multipliers = multipliers[np.argsort(-np.abs(multipliers))]
-        return Point(lam, x, self.map.phase, jac, tangent, multipliers, self.measure(x, lam), iterations)
+        return Point(lam, x, self.map.phase, jac, tangent, multipliers, measures, iterations)
 
-    def measure(self, x, lam: float) -> dict:
+    def measure(self, x, lam: float, run: Optional[dict] = None) -> dict:
         """The orbit's amplitude, impacts per orbit, smallest relative velocity at an impact and
-        smallest clearance (m) off the impacts, from one run of ``P^n`` recorded step by step."""
+        smallest clearance (m) off the impacts, from one run of ``P^n`` recorded step by step (the
+        corrector's last, ``run``, when given)."""
         drive = self.map.drive(lam)
-        record: list = []
-        self.map(x, lam, record=record)
-        count = drive.totals()[0]
-        states = np.array([x] + record)
+        if run is None or "states" not in run:
+            run = {}
+            self.residual(self.unknowns(x, lam), run)
+        count = run.get("count", 0)
+        states = np.array([x] + run.get("states", []))
         top, bottom = hermite_extrema(states[:, 0], states[:, 1], drive.h)
         clearance = 0.5 * self.gap - np.abs(states[:, 2] - states[:, 0])
         onsets = np.flatnonzero((clearance[:-1] > 0) & (clearance[1:] <= 0))
@@ -263,27 +271,29 @@ class Tracer:
     # -- following a branch -----------------------------------------------------------------------
 
     def correct(self, predicted: np.ndarray, tangent: np.ndarray, jac: np.ndarray) -> tuple:
-        """Newton (chord) on ``G = 0, t . (u - u_pred) = 0``: ``(u, iterations, G(u))``, ``u``
-        ``None`` when it fails."""
+        """Newton (chord) on ``G = 0, t . (u - u_pred) = 0``: ``(u, iterations, G(u), run)``
+        (``run``: the last run's states and impact count), ``u`` ``None`` when it fails."""
         system = np.vstack([jac, tangent])
         u = predicted.copy()
         tolerance = self.problem.tolerance * self._base_amplitude(u) / self.length
         previous = math.inf
         for iteration in range(1, self.settings.corrector_iterations + 1):
-            g = self.residual(u)
+            run: dict = {}
+            g = self.residual(u, run)
             if g is None:
-                return None, iteration, None
+                return None, iteration, None, None
             norm = float(np.max(np.abs(g)))
             if norm <= tolerance:
-                return u, iteration, g
+                return u, iteration, g, run
             if norm > 10 * previous:
-                return None, iteration, None
+                return None, iteration, None, None
             previous = norm
             u = u + np.linalg.solve(system, -np.append(g, tangent @ (u - predicted)))
-        g = self.residual(u)
+        run = {}
+        g = self.residual(u, run)
         if g is not None and np.max(np.abs(g)) <= tolerance:
-            return u, self.settings.corrector_iterations, g
-        return None, self.settings.corrector_iterations, None
+            return u, self.settings.corrector_iterations, g, run
+        return None, self.settings.corrector_iterations, None, None
 
     def _base_amplitude(self, u) -> float:
         return self.problem.omega_and_amplitude(self.split(u)[1])[1]
@@ -305,8 +315,8 @@ class Tracer:
                 tangent = moved.tangent if float(moved.tangent[4] * tangent[4]) >= 0 else -moved.tangent
                 last = moved
             u0 = self.unknowns(last.x, last.lam)
-            u, iterations, g = self.correct(u0 + ds * tangent, tangent, last.jacobian)
-            new = self.point(u, iterations, tangent, g) if u is not None else None
+            u, iterations, g, run = self.correct(u0 + ds * tangent, tangent, last.jacobian)
+            new = self.point(u, iterations, tangent, g, run) if u is not None else None
             if new is not None and float(new.tangent @ tangent) < 0.9:
                 new = None  # the branch turned by more than 25 degrees in one step: too far
             if new is None:
@@ -316,7 +326,7 @@ class Tracer:
                 continue
             points.append(new)
             tangent = new.tangent
-            ds = min(s.max_step, ds * 1.3) if iterations <= 3 else (ds * 0.7 if iterations > 5 else ds)
+            ds = min(s.max_step, ds * 1.5) if iterations <= 3 else (ds * 0.7 if iterations > 5 else ds)
             if not lo <= new.lam <= hi:
                 return points, "left the parameter's range"
             away = float(np.linalg.norm(self.unknowns(new.x, new.lam) - origin)) if new.phase == start.phase else math.inf
