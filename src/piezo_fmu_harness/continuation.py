@@ -106,7 +106,7 @@ class Settings:
     step: float = 0.05            # first arclength step (the state in units of Y)
     min_step: float = 1e-4
     max_step: float = 1.0
-    max_points: int = 150         # points a direction, at most
+    max_points: int = 100         # points a direction, at most
     corrector_iterations: int = 8
     max_multiplier: float = 25.0  # a branch stops where a disturbance grows this much per orbit
     doubling_depth: int = 1       # period doublings followed from one seed

@@ -60,6 +60,7 @@ def seeds_of(chains: list[dict]) -> list[dict]:
                 if orbit.get("impacts_per_cycle", 0) > 0 and orbit.get("verdict") in ("stable", "unstable"):
                     seeds.append({"lam": record["lam"], "state": orbit["state"], "phase": orbit["phase"],
                                   "order": orbit["order"], "amplitude": orbit["amplitude"], "depth": 0,
+                                  "impacts_per_cycle": orbit["impacts_per_cycle"],
                                   "stable": orbit["verdict"] == "stable", "direction": chain["direction"]})
     return sorted(seeds, key=lambda s: (not s["stable"], s["lam"]))
 
@@ -86,34 +87,44 @@ class Continuation:
         self.chains.sort(key=lambda chain: chain["direction"] != "up")
         self.seconds["seeds"] = time.perf_counter() - begin
         begin = time.perf_counter()
-        self.pending = seeds_of(self.chains)
+        self.pending, self.running = seeds_of(self.chains), {}
         first = [self._task() for _ in range(2)]
         for _, branch in backend.run_tasks([task for task in first if task], self._follow):
             pass
         self.seconds["branches"] = time.perf_counter() - begin
 
     def _task(self):
-        while self.pending and len(self.branches) + self._running < self.max_branches:
-            seed = self.pending.pop(0)
+        """The next seed to follow: not on a branch already followed, and not of the kind (order,
+        impacts per cycle) of a branch still running, which is likely to cover it."""
+        if len(self.branches) + len(self.running) >= self.max_branches:
+            return None
+        for seed in list(self.pending):
             if self._covered(seed):
+                self.pending.remove(seed)
                 self.skipped += 1
                 continue
-            self._running += 1
-            return (len(self.branches) + self._running, trace_branch,
-                    (asdict(self.problem), asdict(self.settings), seed))
+            if _kind(seed) in self.running.values() and seed.get("depth", 0) == 0:
+                continue
+            self.pending.remove(seed)
+            self._tags += 1
+            self.running[self._tags] = _kind(seed)
+            return (self._tags, trace_branch, (asdict(self.problem), asdict(self.settings), seed))
         return None
 
-    _running = 0
+    running: dict
+    _tags = 0
 
     def _follow(self, tag, branch: dict) -> list:
-        self._running -= 1
+        self.running.pop(tag, None)
         branch["index"] = len(self.branches)
         for event in branch["events"]:
             event["branch"] = branch["index"]
         self.branches.append(branch)
         self.pending = list(branch["seeds"]) + self.pending
-        task = self._task()
-        return [task] if task else []
+        tasks = []
+        while len(self.running) < 2 and (task := self._task()) is not None:
+            tasks.append(task)
+        return tasks
 
     def _covered(self, seed: dict) -> bool:
         if seed.get("depth", 0) > 0:
@@ -126,6 +137,10 @@ class Continuation:
 
     def evaluations(self) -> int:
         return sum(branch["evaluations"] for branch in self.branches)
+
+
+def _kind(seed: dict) -> tuple:
+    return seed["order"], round(seed.get("impacts_per_cycle", 0), 6)
 
 
 # -- results -------------------------------------------------------------------------------------
