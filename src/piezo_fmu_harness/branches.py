@@ -59,12 +59,13 @@ def events(points: list[dict], branch: int) -> list[dict]:
             found.append(event("branch point", min(list(mb), key=lambda mu: abs(mu - 1.0)),
                                0.5 * (a["lam"] + b["lam"]), 0.5 * (a["amplitude"] + b["amplitude"])))
         if _real_product(ma, -1.0) * _real_product(mb, -1.0) < 0:
-            found.append(event("period doubling", min(list(mb), key=lambda mu: abs(mu + 1.0)),
-                               0.5 * (a["lam"] + b["lam"]), 0.5 * (a["amplitude"] + b["amplitude"])))
+            near = [min(ms, key=lambda mu: abs(mu + 1.0)) for ms in (ma, mb)]
+            w = _crossing(abs(near[0] + 1.0), -abs(near[1] + 1.0))
+            found.append(event("period doubling", near[1], *_between(a, b, w)))
         if _unstable_pairs(ma) != _unstable_pairs(mb):
-            pair = max((mu for mu in list(ma) + list(mb) if abs(mu.imag) >= REAL), key=abs, default=None)
-            found.append(event("Neimark-Sacker", pair, 0.5 * (a["lam"] + b["lam"]),
-                               0.5 * (a["amplitude"] + b["amplitude"])))
+            pairs = [max((mu for mu in ms if abs(mu.imag) >= REAL), key=abs, default=complex(0.0)) for ms in (ma, mb)]
+            w = _crossing(abs(pairs[0]) - 1.0, abs(pairs[1]) - 1.0)
+            found.append(event("Neimark-Sacker", max(pairs, key=abs), *_between(a, b, w)))
         if a["impacts"] != b["impacts"]:
             velocities = [v for v in (a["min_impact_velocity"], b["min_impact_velocity"]) if v is not None]
             grazing = event("grazing", None, 0.5 * (a["lam"] + b["lam"]), 0.5 * (a["amplitude"] + b["amplitude"]))
@@ -72,6 +73,16 @@ def events(points: list[dict], branch: int) -> list[dict]:
             grazing["min_impact_velocity"] = min(velocities) if velocities else None
             found.append(grazing)
     return found
+
+
+def _crossing(before: float, after: float) -> float:
+    """Where, as a fraction of the step, a quantity going from ``before`` to ``after`` (opposite
+    signs) crosses zero, linearly; the middle when they do not straddle it."""
+    return before / (before - after) if before * after < 0 else 0.5
+
+
+def _between(a: dict, b: dict, w: float) -> tuple[float, float]:
+    return a["lam"] + w * (b["lam"] - a["lam"]), a["amplitude"] + w * (b["amplitude"] - a["amplitude"])
 
 
 def _turning_point(points: list[dict], k: int) -> tuple[float, float]:
