@@ -1,0 +1,26 @@
+"""``piezo-fmu --help`` and every subcommand's ``--help`` list the same commands and options, with
+the same defaults, choices and metavars, as captured before the harness was arranged by study
+(issue 22): ``tests/data/cli_surface.json``, written by ``python tests/cli_surface.py``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from cli_surface import surface
+
+from piezo_fmu_harness import cli
+
+CAPTURED = Path(__file__).resolve().parent / "data" / "cli_surface.json"
+
+
+def test_the_commands_are_those_captured():
+    captured = json.loads(CAPTURED.read_text())
+    assert list(surface(cli._parser())) == list(captured)
+
+
+def test_every_command_takes_the_options_captured_with_their_defaults():
+    captured = json.loads(CAPTURED.read_text())
+    live = json.loads(json.dumps(surface(cli._parser())))
+    for command, options in captured.items():
+        assert live[command] == options, command
