@@ -40,12 +40,14 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
-from piezo_fmu_harness import cli, commands, commands_forced  # noqa: E402
-from piezo_fmu_harness import frequency_response as fr  # noqa: E402
-from piezo_fmu_harness import frequency_results  # noqa: E402
+from piezo_fmu_harness import cli  # noqa: E402
+from piezo_fmu_harness.periodic.band import frequency_spec  # noqa: E402
+from piezo_fmu_harness.studies.forced import chains as fr  # noqa: E402
+from piezo_fmu_harness.studies.forced import results as frequency_results  # noqa: E402
+from piezo_fmu_harness.studies.sweep import command as commands  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
-from piezo_fmu_harness.sweep import execute, open_sweep  # noqa: E402
+from piezo_fmu_harness.studies.sweep.run import execute, open_sweep  # noqa: E402
 
 
 def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
@@ -53,7 +55,7 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
     unzipdir = model.extract()
     instance = Instance(model, unzipdir)
     try:
-        spec = commands_forced.frequency_spec(args, model, instance)
+        spec = frequency_spec(args, model, instance)
     finally:
         instance.free()
     run = fr.open_frequency_run(model, spec, out, resume=False, force=True)

@@ -41,11 +41,13 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from fmpy import simulate_fmu  # noqa: E402
 
-from piezo_fmu_harness import analysis, cli, commands  # noqa: E402
+from piezo_fmu_harness import cli  # noqa: E402
+from piezo_fmu_harness.studies.sweep import analysis  # noqa: E402
+from piezo_fmu_harness.studies.sweep import command as commands  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
 from piezo_fmu_harness.spec import DEFAULT_SWEEP_STEP  # noqa: E402
-from piezo_fmu_harness.sweep import display, execute, open_sweep, write_results  # noqa: E402
+from piezo_fmu_harness.studies.sweep.run import display, execute, open_sweep, write_results  # noqa: E402
 
 TARGET_NAIVE = 5.0
 TARGET_CORE = 1.5

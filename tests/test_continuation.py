@@ -12,8 +12,8 @@ import pytest
 
 from fmu_host import assert_refused, run_cli
 
-from piezo_fmu_harness.analysis import open_dataset
-from piezo_fmu_harness.drive import HarmonicDrive
+from piezo_fmu_harness.datasets import open_dataset
+from piezo_fmu_harness.periodic.drive import HarmonicDrive
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

@@ -20,8 +20,10 @@ import pytest
 from fmpy import simulate_fmu
 from fmu_host import assert_refused, run_cli
 
-from piezo_fmu_harness import cli, commands
-from piezo_fmu_harness.analysis import PAPER_ZONES, open_dataset, perfectibility
+from piezo_fmu_harness import cli
+from piezo_fmu_harness.datasets import open_dataset
+from piezo_fmu_harness.studies.sweep import command as commands
+from piezo_fmu_harness.studies.sweep.analysis import PAPER_ZONES, perfectibility
 from piezo_fmu_harness.fmu import FmuModel, Instance
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -302,7 +304,7 @@ def test_the_command_exits_with_status_2_on_bad_input(fmu, tmp_path):
 def test_zones_connected_parts_are_scipys_labels():
     from scipy import ndimage
 
-    from piezo_fmu_harness.analysis import connected_parts
+    from piezo_fmu_harness.studies.sweep.analysis import connected_parts
 
     rng = np.random.default_rng(13)
     for shape in [(31, 31), (7, 9, 5), (40,), (6, 5, 4, 3)]:

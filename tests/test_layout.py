@@ -7,6 +7,9 @@
 - No module over 400 lines, no class over 250.
 - No file of the project points at the team's folder beside the clone (``..`` then ``shared``): a
   user's clone has no such folder.
+- The harness is arranged by study (issue 22): each study is a module or package under
+  ``piezo_fmu_harness.studies``; the studies never import each other, and the infrastructure (the
+  rest of the package) never imports a study; the CLI only collects the studies' subcommands.
 """
 
 from __future__ import annotations
@@ -127,3 +130,54 @@ def test_no_file_of_the_project_points_at_the_team_folder():
         if b"../" + b"shared" in path.read_bytes():
             offenders.append(name)
     assert not offenders, f"these files point at ../{'shared'}, which a user's clone does not have: {offenders}"
+
+
+# -- the harness by study ---------------------------------------------------------------------------
+
+STUDIES = "piezo_fmu_harness.studies"
+
+
+def study_of(module: str):
+    """The study a harness module belongs to (``piezo_fmu_harness.studies.<study>``), or None for the
+    infrastructure (and for the registry, ``piezo_fmu_harness.studies`` itself)."""
+    parts = module.split(".")
+    return ".".join(parts[:3]) if len(parts) >= 3 and ".".join(parts[:2]) == STUDIES else None
+
+
+def harness_modules() -> dict:
+    return {module_name(p): p for p in sources(HARNESS)}
+
+
+def test_the_harness_has_studies_and_infrastructure():
+    modules = harness_modules()
+    studies = {study_of(m) for m in modules} - {None}
+    assert len(studies) >= 7, studies
+    assert {"piezo_fmu_harness.fmu", "piezo_fmu_harness.engine", "piezo_fmu_harness.store", "piezo_fmu_harness.spec",
+            "piezo_fmu_harness.checks", "piezo_fmu_harness.drawing", "piezo_fmu_harness.cli"} <= set(modules)
+
+
+@pytest.mark.parametrize("path", sources(HARNESS), ids=lambda p: str(p.relative_to(HARNESS)))
+def test_the_studies_never_import_each_other_and_the_infrastructure_never_imports_a_study(path):
+    modules = harness_modules()
+    name = module_name(path)
+    own = study_of(name)
+    imported = {m for m in imports(path) if m.startswith(STUDIES + ".") and study_of(m)}
+    if name in (STUDIES, "piezo_fmu_harness.cli"):
+        return  # the registry collects the studies (the CLI reads the registry only)
+    others = sorted(m for m in imported if study_of(m) != own and study_of(m) in {study_of(k) for k in modules})
+    assert not others, f"{name} imports {others}"
+
+
+def test_the_cli_only_collects_the_studies_subcommands():
+    found = imports(HARNESS / "cli.py")
+    registry = f"{STUDIES}.REGISTRY"
+    assert registry in found
+    assert not any(study_of(m) for m in found - {registry}), found
+
+
+def test_a_study_is_one_line_in_the_registry():
+    from piezo_fmu_harness import studies
+
+    registered = {f.__module__.rsplit(".", 1)[0] if f.__module__.count(".") > 2 else f.__module__ for f in studies.REGISTRY}
+    packages = {study_of(m) for m in harness_modules()} - {None}
+    assert registered == packages, (registered, packages)

@@ -17,7 +17,7 @@ from fmpy import simulate_fmu
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.fmu import FmuModel
-from piezo_fmu_harness.load import find_optimum
+from piezo_fmu_harness.studies.load.sweep import find_optimum
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
@@ -212,7 +212,8 @@ def test_the_harness_never_imports_the_core():
             else:
                 continue
             assert not any(name.split(".")[0] == "piezo_fmu" for name in names), (path.name, names)
-    modules = [f"piezo_fmu_harness.{p.stem}" for p in sorted(HARNESS.glob("*.py")) if p.stem != "__main__"]
+    modules = [".".join(("piezo_fmu_harness",) + p.relative_to(HARNESS).with_suffix("").parts).removesuffix(".__init__")
+               for p in sorted(HARNESS.rglob("*.py")) if p.stem != "__main__" and "__pycache__" not in p.parts]
     code = (f"import sys, importlib\nfor m in {modules!r}: importlib.import_module(m)\n"
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'piezo_fmu'))")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

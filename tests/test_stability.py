@@ -19,10 +19,10 @@ import pytest
 
 from fmu_host import run_cli
 
-from piezo_fmu_harness.analysis import open_dataset
-from piezo_fmu_harness.drive import HarmonicDrive
-from piezo_fmu_harness.frequency_response import rest_state, solve_point
-from piezo_fmu_harness.steady_state import Settings
+from piezo_fmu_harness.datasets import open_dataset
+from piezo_fmu_harness.periodic.drive import HarmonicDrive
+from piezo_fmu_harness.periodic.band import rest_state, solve_point
+from piezo_fmu_harness.periodic.steady_state import Settings
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

@@ -3,7 +3,7 @@
 **The drive.** The base moves as ``y = Y sin(w t + phi)``. The FMU holds its inputs as a first
 order hold over each communication step, ``y = y_k + v_k (t - t_k)``, so what it can be given is a
 continuous piecewise-linear base: ``N`` steps per forcing period (``Settings.samples`` in
-:mod:`piezo_fmu_harness.steady_state`), node values ``y_k = A sin(w t_k + phi)`` and slopes
+:mod:`piezo_fmu_harness.periodic.steady_state`), node values ``y_k = A sin(w t_k + phi)`` and slopes
 ``v_k = (y_{k+1} - y_k) / h`` (the velocity consistent with the displacement, so the base never
 jumps and does no spurious work). The fundamental of that
 interpolant is ``A sinc^2(pi/N)`` (the Fourier transform of the hat function); the nodes take
@@ -38,7 +38,7 @@ import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2FMUstate, fmi2Integer, fmi2Real, fmi2ValueReference
 
-from .fmu import Instance
+from ..fmu import Instance
 
 #: The section state's outputs, in the order of ``x``.
 STATE_OUTPUTS = ("main_displacement", "main_velocity", "impactor_displacement", "impactor_velocity")

@@ -1,7 +1,7 @@
 """The stability of a periodic orbit: its Floquet multipliers, through the FMU.
 
 An orbit of order ``n`` is a fixed point ``x*`` of the ``n``-th power of the period map,
-``P^n(x*) = x*`` (:mod:`piezo_fmu_harness.drive`). Its Floquet multipliers are the eigenvalues of
+``P^n(x*) = x*`` (:mod:`piezo_fmu_harness.periodic.drive`). Its Floquet multipliers are the eigenvalues of
 the Jacobian ``J = dP^n/dx`` at ``x*``. A small departure ``e`` from the orbit becomes ``J e`` one
 orbit later, so the orbit is stable when every multiplier lies inside the unit circle, and a
 multiplier ``mu`` outside it makes a departure grow by ``|mu|`` per orbit.
@@ -162,7 +162,10 @@ def floquet(period_map: Callable, x, scale: np.ndarray, size: float, neutral: bo
     neutral : bool
         The orbit makes no impact: the impact mass's pair is neutral (see the module's text).
 
-    Returns ``None`` when the FMU refuses the starts around ``x`` on both sides.
+    Returns
+    -------
+    Floquet or None
+        ``None`` when the FMU refuses the starts around ``x`` on both sides.
     """
     h = STEP * size
     results = []

@@ -1,7 +1,7 @@
 """The steady state of the FMU under harmonic base motion at one frequency: a stable periodic
 orbit, found by shooting and checked for stability, or a motion that is not periodic (the drive,
-the section state and the measures are in :mod:`piezo_fmu_harness.drive`, the Floquet multipliers
-in :mod:`piezo_fmu_harness.stability`).
+the section state and the measures are in :mod:`piezo_fmu_harness.periodic.drive`, the Floquet multipliers
+in :mod:`piezo_fmu_harness.periodic.stability`).
 
 **Orbits.** Time-marching at ``zeta = 0.0016`` takes minutes of simulated time, so a periodic orbit
 is found by shooting: Newton on ``P^n(x) - x`` (``n`` the order of the orbit: 1, or a multiple
@@ -40,7 +40,7 @@ from typing import Optional
 import numpy as np
 
 from .drive import HarmonicDrive, measure
-from .fmu import FmuRunError
+from ..fmu import FmuRunError
 from .stability import Floquet, floquet
 
 

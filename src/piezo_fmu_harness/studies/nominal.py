@@ -23,56 +23,16 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
-from fmpy import simulate_fmu
-from fmpy.fmi1 import FMICallException
+from ..checks import assignments, open_model, preflight, times
+from ..drawing import new_figure, save_png
+from ..fmu import FmuModel, Instance
+from ..series import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
+from ..spec import DEFAULT_STOP_TIME
 
-from piezo_fmu_harness.fmu import FmuModel, FmuRunError, Instance
-from piezo_fmu_harness.spec import DEFAULT_STOP_TIME
-
-#: Communication step of the nominal time series (s).
-NOMINAL_STEP = 1e-4
 #: The gap (m) that removes the damper: far beyond any excursion of the impact mass relative
 #: to the main mass (twice the 10 mm release amplitude).
 WIDE_GAP = 1.0
 DEFAULT_OUT = Path("results") / "nominal"
-
-
-def simulate_series(model: FmuModel, instance: Instance, values: dict, stop_time: float, step: float) -> np.ndarray:
-    """Every output of one run at each communication point (fmpy's structured array, SI).
-
-    ``instance`` is reused: it is reset first unless fresh.
-    """
-    instance.renew()
-    try:
-        return simulate_fmu(instance.unzipdir, model_description=model.model_description,
-                            fmu_instance=instance.fmu, start_values=dict(values), stop_time=stop_time,
-                            output_interval=step, output=list(model.outputs), validate=False)
-    except FMICallException as error:
-        raise FmuRunError("; ".join(dict.fromkeys(instance.messages)) or str(error)) from None
-
-
-def metrics_at_end(series: np.ndarray) -> dict:
-    """The paper's metrics from the last row of a time series (SI, and DI also in cm/s)."""
-    last = series[-1]
-    di = float(last["damping_inclination"])
-    return {
-        "impact_count": int(last["impact_count"]),
-        "DI_m_per_s": di,
-        "DI_cm_per_s": 100.0 * di,
-        "V_rms_V": float(last["voltage_rms"]),
-        "P_ave_W": float(last["average_power"]),
-        "last_impact_voltage_V": float(last["last_impact_voltage"]),
-        "energy_dissipated_J": float(last["energy_dissipated"]),
-        "energy_balance_error_J": float(last["energy_balance_error"]),
-    }
-
-
-def write_csv(path: Path, columns: dict) -> None:
-    """A plain CSV with a header row; numbers to 12 significant digits, SI units."""
-    names = list(columns)
-    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
-    np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.12g")
 
 
 def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEFAULT_STOP_TIME,
@@ -105,11 +65,9 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     files = {"timeseries": out / "timeseries.csv", "summary": out / "summary.json"}
     write_csv(files["timeseries"], columns)
 
-    from piezo_fmu_harness import curves
-
     changed = ", ".join(f"{k} = {v:g}" for k, v in overrides.items())
     title = f"{'nominal' if not changed else 'nominal with ' + changed}, {stop_time:g} s"
-    fig3a, fig3b = curves.nominal_figures(with_damper["time"], with_damper, without_damper, out, title)
+    fig3a, fig3b = nominal_figures(with_damper["time"], with_damper, without_damper, out, title)
     files.update(fig3a=fig3a, fig3b=fig3b)
 
     summary = {
@@ -146,3 +104,52 @@ def summary_lines(summary: dict) -> list[str]:
         f"  energy ledger    {summary['energy_balance_error_J']:.2e} J residual",
         f"  files in         {Path(summary['files']['summary']).parent}",
     ]
+
+
+def nominal_figures(t, with_damper: dict, without_damper: dict, folder: Path, title: str) -> list[Path]:
+    """Fig. 3: (a) the main mass with and without the damper, (b) each barrier's voltage."""
+    fig, ax = new_figure((7.5, 4.2))
+    ax.plot(t, 1e3 * without_damper["main_displacement"], color="0.55", lw=1.0, label="without damper")
+    ax.plot(t, 1e3 * with_damper["main_displacement"], color="C0", lw=1.0, label="with piezo-impact damper")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("main mass displacement $p$ (mm)")
+    ax.set_title(f"Fig. 3(a): main mass with and without the damper ({title})", fontsize=9)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
+    ax.grid(alpha=0.3)
+    a = save_png(fig, Path(folder) / "fig3a.png")
+
+    fig, axes = new_figure((7.5, 5.2), 2, 1, sharex=True)
+    for ax, side, color in zip(axes, ("left", "right"), ("C1", "C2")):
+        ax.plot(t, with_damper[f"voltage_{side}"], color=color, lw=0.8)
+        ax.set_ylabel(f"$V$ {side} barrier (V)")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(f"Fig. 3(b): output voltage of each piezoelectric barrier ({title})", fontsize=9)
+    return [a, save_png(fig, Path(folder) / "fig3b.png")]
+
+
+def command(args) -> int:
+    from ..spec import prepare_output_dir
+
+    model = open_model(args)
+    overrides = assignments(model, args.set)
+    stop_time, step = times(args, NOMINAL_STEP)
+    out = prepare_output_dir(args.out)
+    unzipdir, instance = preflight(model, [overrides], "--set")
+    try:
+        summary = run_nominal(model, out, stop_time, step, overrides, instance=instance)
+    finally:
+        instance.free()
+        shutil.rmtree(unzipdir, ignore_errors=True)
+    print("\n".join(summary_lines(summary)))
+    return 0
+
+
+def register(commands) -> None:
+    """``piezo-fmu nominal``."""
+    from ..options import common, results_folder
+
+    nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series, summary, figures")
+    common(nominal, 1e-4, "the time series' sampling")
+    results_folder(nominal, "nominal")
+    nominal.set_defaults(run=command)

@@ -12,9 +12,11 @@ import json
 import shutil
 from pathlib import Path
 
-from .fmu import FmuModel, Instance
-from .nominal import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
-from .spec import DEFAULT_STOP_TIME
+from ..checks import assignments, open_model, preflight, times
+from ..drawing import new_figure, save_png
+from ..fmu import FmuModel, Instance
+from ..series import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
+from ..spec import DEFAULT_STOP_TIME, UsageError
 
 DESIGNS = {
     "designed": {"x1": 0.010, "m": 0.2, "d": 0.010},
@@ -69,11 +71,10 @@ def run_two_designs(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float =
             columns[f"{output}_{name}"] = s[output]
     write_csv(files["timeseries"], columns)
 
-    from . import curves
 
     labels = {f"{name} (x1 = {d['x1'] * 1e3:g} mm, m = {d['m']:g} kg, d = {d['d'] * 1e3:g} mm)": series[name]
               for name, d in DESIGNS.items()}
-    files["figure"] = curves.two_designs_figure(series["designed"]["time"], labels, out, f"{stop_time:g} s")
+    files["figure"] = two_designs_figure(series["designed"]["time"], labels, out, f"{stop_time:g} s")
     result["files"] = {key: str(path) for key, path in files.items()}
     files["json"].write_text(json.dumps(result, indent=2) + "\n")
     return result
@@ -129,3 +130,49 @@ def summary_lines(result: dict) -> list[str]:
     lines.append(f"  files in {Path(result['files']['table']).parent}")
     return lines
 
+
+def two_designs_figure(t, runs: dict, folder: Path, title: str) -> Path:
+    """Fig. 10: (a) the main mass and (b) the running RMS voltage of the two designs."""
+    fig, axes = new_figure((12, 4.4), 1, 2)
+    for (label, series), color in zip(runs.items(), ("C0", "C3")):
+        axes[0].plot(t, 1e3 * series["main_displacement"], color=color, lw=0.9, label=label)
+        axes[1].plot(t, series["voltage_rms"], color=color, lw=1.2, label=label)
+    axes[0].set_ylabel("main mass displacement $p$ (mm)")
+    axes[0].set_title("(a) vibratory behaviour", fontsize=9)
+    axes[1].set_ylabel("$V_{rms}$ over the impacts so far (V)")
+    axes[1].set_yscale("symlog", linthresh=1.0)
+    axes[1].set_title("(b) energy behaviour (RMS output voltage, eq. 30)", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("time (s)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(1.1, -0.14), ncol=2, frameon=False)
+    fig.suptitle(f"Fig. 10: designed vs poor piezo-impact damper ({title})", fontsize=11)
+    return save_png(fig, Path(folder) / "fig10.png")
+
+
+def command(args) -> int:
+    from ..spec import prepare_output_dir
+
+    model = open_model(args)
+    overrides = assignments(model, args.set)
+    clash = sorted(set(overrides) & {"x1", "m", "d"})
+    if clash:
+        raise UsageError(f"--set {clash[0]}: x1, m and d are what the two designs differ by; they cannot be set")
+    stop_time, step = times(args, NOMINAL_STEP)
+    out = prepare_output_dir(args.out)
+    unzipdir, instance = preflight(model, [{**overrides, **d} for d in DESIGNS.values()], "two designs")
+    instance.free()
+    shutil.rmtree(unzipdir, ignore_errors=True)
+    result = run_two_designs(model, out, stop_time, step, overrides)
+    print("\n".join(summary_lines(result)))
+    return 0
+
+
+def register(commands) -> None:
+    """``piezo-fmu two-designs``."""
+    from ..options import common, results_folder
+
+    two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
+    common(two, 1e-4, "the time series' sampling")
+    results_folder(two, "two-designs")
+    two.set_defaults(run=command)

@@ -1,5 +1,5 @@
 """A branch of periodic orbits from one seed, and the bifurcations along it (see
-:mod:`piezo_fmu_harness.continuation` for the method).
+:mod:`piezo_fmu_harness.studies.continuation.tracer` for the method).
 
 :func:`trace_branch` is a task of the sweep engine: it follows the branch through a seed orbit in
 both directions, names the bifurcations between consecutive points, and at a period doubling
@@ -16,8 +16,8 @@ from typing import Optional
 
 import numpy as np
 
-from .continuation import Point, Problem, Settings, Tracer
-from .fmu import Instance
+from ...fmu import Instance
+from .tracer import Point, Problem, Settings, Tracer
 
 #: A real multiplier counts as real when its imaginary part is below this.
 REAL = 1e-9

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .curves import new_figure, save_png
+from ...drawing import new_figure, save_png
 
 #: Markers of the bifurcations.
 EVENT_STYLES = {

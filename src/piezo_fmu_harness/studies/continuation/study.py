@@ -2,12 +2,12 @@
 followed through their folds, with their stability and bifurcations.
 
 1. **Seeds.** A sweep up and a sweep down over ``--count`` values of the parameter (the frequency
-   response's shooting, :func:`piezo_fmu_harness.frequency_response.solve_point`, with the damper)
+   response's shooting, :func:`piezo_fmu_harness.periodic.band.solve_point`, with the damper)
    gives the orbits with impacts it meets: the stable ones it reports and the unstable ones it set
    aside. Orbits without an impact are not continued: they are the linear response in closed form,
    and the free impact mass makes them a family, not a branch.
 2. **Branches.** Each seed not already on a branch is followed both ways
-   (:func:`piezo_fmu_harness.branches.trace_branch`, a task of the sweep engine, so two run at a
+   (:func:`piezo_fmu_harness.studies.continuation.branches.trace_branch`, a task of the sweep engine, so two run at a
    time), and the seeds of the period-doubled branches it finds are followed in turn.
 3. **Results.** ``continuation.nc`` (the points of every branch on a ``point`` dimension, their
    multipliers, and the bifurcations on an ``event`` dimension), ``branches.csv``, ``events.csv``,
@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ...periodic.band import rest_state, solve_point
+from ...periodic.steady_state import Settings as SteadySettings
 from .branches import distance_to_branch, trace_branch
-from .continuation import Problem, Settings
-from .frequency_response import rest_state, solve_point
-from .steady_state import Settings as SteadySettings
+from .tracer import Problem, Settings
 
 #: A seed lies on a branch when the branch's amplitude at its parameter is within this (relative).
 COVERED = 2e-3
@@ -218,8 +218,8 @@ def summarize(study: Continuation) -> dict:
 
 
 def write(study: Continuation, folder: Path, parameter_units: str) -> list[Path]:
-    from . import continuation_figure
-    from .analysis import save_dataset
+    from ...datasets import save_dataset
+    from . import figure as continuation_figure
 
     ds = build_dataset(study, parameter_units)
     files = [folder / "continuation.nc", folder / "branches.csv", folder / "events.csv", folder / "summary.json",
@@ -245,8 +245,8 @@ MAX_BRANCHES = 12
 
 def parameter_range(model, args, spec) -> tuple[str, tuple, list, str]:
     """The continued parameter, its range, the seeds' values and its units, checked."""
-    from .checks import whole
-    from .spec import UsageError
+    from ...checks import whole
+    from ...spec import UsageError
 
     name = args.parameter
     if name == "ratio":
@@ -282,10 +282,10 @@ def parameter_range(model, args, spec) -> tuple[str, tuple, list, str]:
 def command(args) -> int:
     import shutil
 
-    from .checks import PROG, make_backend, open_model, positive, preflight, whole, worker_count
-    from .commands_forced import frequency_spec
-    from .engine import InProcess
-    from .spec import UsageError
+    from ...checks import PROG, make_backend, open_model, positive, preflight, whole, worker_count
+    from ...engine import InProcess
+    from ...periodic.band import frequency_spec
+    from ...spec import UsageError
 
     model = open_model(args)
     jobs = worker_count(args)

@@ -1,7 +1,7 @@
 """Pseudo-arclength continuation of the periodic orbits of the forced response, through the FMU.
 
 An orbit of order ``n`` is a zero of ``G(x, lam) = P^n_lam(x) - x``: ``P`` the period map of
-:mod:`piezo_fmu_harness.drive` at the section phase ``phi``, ``lam`` the continued parameter (the
+:mod:`piezo_fmu_harness.periodic.drive` at the section phase ``phi``, ``lam`` the continued parameter (the
 frequency ratio ``w / sqrt(K/M)``, the base amplitude ``Y`` or a damper parameter). The zeros form
 curves in ``(x, lam)``, and a curve may turn back in ``lam`` (a fold): a sweep in ``lam`` jumps
 there, and only continuation in the arclength ``s`` passes it (Keller's pseudo-arclength, as AUTO
@@ -44,8 +44,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .drive import HarmonicDrive, hermite_extrema
-from .fmu import FmuRunError, Instance
+from ...fmu import FmuRunError, Instance
+from ...periodic.drive import HarmonicDrive, hermite_extrema
 
 
 @dataclass(frozen=True)

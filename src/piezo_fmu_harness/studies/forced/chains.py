@@ -4,7 +4,7 @@ frequency, with and without the damper, through the FMU.
 The base moves as ``y = Y sin(w t)``, ``Y`` given directly or as ``A / w^2`` for an acceleration
 amplitude ``A``; ``w`` runs over ``count`` evenly spaced values between ``ratio_min`` and
 ``ratio_max`` times ``sqrt(K/M)``. At each frequency the steady state is found by shooting and
-verified by simulation (:mod:`piezo_fmu_harness.steady_state`), starting from the previous frequency's final
+verified by simulation (:mod:`piezo_fmu_harness.periodic.steady_state`), starting from the previous frequency's final
 state, so that a sweep follows one branch of coexisting orbits until it ends (a jump). Four chains
 run: with and without the damper, each up and down. Without the damper, the gap is widened until
 the impact mass cannot reach a barrier, as for Fig. 3a.
@@ -15,7 +15,7 @@ submitted as soon as it returns, so four chains keep two cores busy. Each finish
 appended to ``points.jsonl``; ``--resume`` continues every chain from its last finished point.
 
 A folder ends up with ``frequency_response.json`` (what was asked), ``points.jsonl``, and the
-results that :mod:`piezo_fmu_harness.frequency_results` writes: ``frequency_response.nc`` (xarray,
+results that :mod:`piezo_fmu_harness.studies.forced.results` writes: ``frequency_response.nc`` (xarray,
 units in attributes), ``frequency_response.csv``, ``summary.json`` and the figures
 ``amplitude.png``, ``power.png``, ``impacts.png``.
 
@@ -26,29 +26,18 @@ from __future__ import annotations
 
 import json
 import sys
-import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
-
-from .drive import STATE_PARAMETERS, HarmonicDrive
-from .fmu import FmuModel, FmuRunError, Instance
-from .steady_state import Settings, SteadyState
-from .store import PointStore, open_folder
+from ...fmu import FmuModel
+from ...periodic.band import FrequencySpec, rest_state, solve_point
+from ...store import PointStore, open_folder
 
 HEADER_FILE = "frequency_response.json"
 #: The four chains, in the order their first points are submitted (the costly ones first).
 CHAINS = (("with", "up"), ("with", "down"), ("without", "up"), ("without", "down"))
-DAMPER_CASES, DIRECTIONS = ("with", "without"), ("up", "down")
-#: The band's defaults: w / sqrt(K/M) from 0.5 to 2 at 61 frequencies (at least 60, and sqrt(K/M)
-#: itself one of them, a step of 0.025), at most 400 cycles each, at least 2 frequencies.
-BAND_DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 400, "fewest": 2}
-#: Base displacement amplitude (m): the no-damper response at sqrt(K/M) would be 1/(2 zeta) = 316
-#: times it, so 1 mm makes the nominal damper impact over a band around resonance.
-DEFAULT_AMPLITUDE = 1e-3
-DEFAULT_VOLTAGE_MODEL = 1
+DIRECTIONS = ("up", "down")
 #: Up and down sweeps "differ" at a frequency when both settled and their orbits' orders or
 #: impacts per cycle differ, or their amplitudes differ by more than this (relative).
 BAND_TOLERANCE = 1e-3
@@ -80,88 +69,7 @@ MEASURES = {
 }
 
 
-@dataclass(frozen=True)
-class FrequencySpec:
-    """A frequency-response study (SI).
-
-    Attributes
-    ----------
-    ratios : tuple
-        Frequency ratios ``w / sqrt(K/M)``, increasing.
-    natural : float
-        ``sqrt(K/M)``, rad/s.
-    amplitude, acceleration : float or None
-        Base displacement amplitude ``Y`` (m), or acceleration amplitude ``A`` (m/s^2); one is set.
-    values : dict
-        FMU parameters of the damper (``--set``, ``voltage_model``, ``R_load``).
-    wide_gap : float
-        Gap ``d`` (m) of the runs without the damper.
-    settings : Settings
-        How each steady state is found.
-    """
-
-    ratios: tuple
-    natural: float
-    amplitude: Optional[float]
-    acceleration: Optional[float]
-    values: dict
-    wide_gap: float
-    settings: Settings = field(default_factory=Settings)
-
-    @property
-    def omegas(self) -> np.ndarray:
-        return np.array(self.ratios) * self.natural
-
-    def base_amplitude(self, omega: float) -> float:
-        """``Y`` (m) at ``omega`` (rad/s)."""
-        return self.amplitude if self.amplitude is not None else self.acceleration / omega**2
-
-    def chain_values(self, damper: str) -> dict:
-        return dict(self.values) if damper == "with" else {**self.values, "d": self.wide_gap}
-
-    def sequence(self, direction: str) -> list[int]:
-        """Frequency indices in the order a chain visits them."""
-        indices = list(range(len(self.ratios)))
-        return indices if direction == "up" else indices[::-1]
-
-    def index(self, chain: int, frequency: int) -> int:
-        """The record index of a point: unique over the four chains."""
-        return chain * len(self.ratios) + frequency
-
-    def to_dict(self) -> dict:
-        return {"ratios": list(self.ratios), "natural_rad_per_s": self.natural, "amplitude_m": self.amplitude,
-                "acceleration_m_per_s2": self.acceleration, "values": dict(self.values),
-                "wide_gap_m": self.wide_gap, "settings": asdict(self.settings)}
-
-
-def wide_gap(spec_amplitude: float, peak_transmissibility: float) -> float:
-    """A gap (m) the impact mass of the runs without the damper cannot cross: the nominal case's
-    1 m, or four times the largest linear amplitude when that is larger."""
-    return max(1.0, 4.0 * spec_amplitude * peak_transmissibility)
-
-
-def linear_transmissibility(omega, M: float, K: float, C: float):
-    """``|X/Y|`` of the base-excited oscillator (absolute displacement over base amplitude)."""
-    omega = np.asarray(omega, float)
-    return np.sqrt((K**2 + (C * omega) ** 2) / ((K - M * omega**2) ** 2 + (C * omega) ** 2))
-
-
 # -- one point, in a worker ------------------------------------------------------------------------
-
-def solve_point(instance: Instance, index: int, values: dict, omega: float, amplitude: float,
-                settings: Settings, state, phase: float) -> dict:
-    """The steady state at ``omega`` from the guess ``(state, phase)``: a JSON-safe record (a
-    task of the sweep engine)."""
-    begin, begin_cpu = time.perf_counter(), time.process_time()
-    record = {"index": index, "omega": omega, "base_amplitude": amplitude}
-    try:
-        drive = HarmonicDrive(instance, values, omega, amplitude, settings.samples)
-        record.update(status="ok", error=None, **SteadyState(drive, settings).solve(state, phase))
-    except FmuRunError as error:
-        record.update(status="error", error=str(error), settled=False)
-    record["seconds"] = time.perf_counter() - begin
-    record["cpu_seconds"] = time.process_time() - begin_cpu
-    return record
 
 
 # -- the study -------------------------------------------------------------------------------------
@@ -256,8 +164,3 @@ def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None
         finally:
             bar.close()
             backend.close(cancel=interrupted)
-
-
-def rest_state() -> list[float]:
-    """The guess of a chain's first point: everything at rest (``p = q = 0``)."""
-    return [0.0] * len(STATE_PARAMETERS)

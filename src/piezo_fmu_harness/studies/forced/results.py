@@ -1,4 +1,4 @@
-"""The results of a frequency response (:mod:`piezo_fmu_harness.frequency_response`): the
+"""The results of a frequency response (:mod:`piezo_fmu_harness.studies.forced.chains`): the
 dataset over ``(damper, direction, omega)``, where the two sweep directions differ, the summary
 (resonant amplitude with and without the damper, the band where it helps, the best harvested power,
 the unstable orbits met) and the files: ``frequency_response.nc`` (xarray, units in attributes),
@@ -15,10 +15,10 @@ from typing import Optional
 
 import numpy as np
 
-from .analysis import bands
-from .fmu import FmuModel
-from .frequency_response import (BAND_TOLERANCE, CHAINS, DAMPER_CASES, DIRECTIONS, MEASURES, FrequencyRun,
-                                 FrequencySpec, linear_transmissibility)
+from ...datasets import bands
+from ...fmu import FmuModel
+from ...periodic.band import DAMPER_CASES, FrequencySpec, linear_transmissibility
+from .chains import BAND_TOLERANCE, CHAINS, DIRECTIONS, MEASURES, FrequencyRun
 
 
 def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
@@ -267,12 +267,13 @@ def unstable_frame(ds):
 def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
     """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes), after
     return ``{"dataset", "summary", "files"}``."""
-    from . import curves, figures
-    from .analysis import save_dataset
+    from ...datasets import save_dataset
+    from ...drawing import Rendering
+    from .figures import frequency_figure_calls
 
     ds = build_dataset(run.spec, run.done, model)
     report = summarize(ds)
-    rendering = figures.Rendering(curves.frequency_figure_calls(ds, run.folder), jobs)
+    rendering = Rendering(frequency_figure_calls(ds, run.folder), jobs)
     files = [run.folder / "frequency_response.nc", run.folder / "frequency_response.csv", run.folder / "summary.json",
              run.folder / "unstable_orbits.csv"]
     save_dataset(ds, files[0])

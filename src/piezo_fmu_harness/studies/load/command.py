@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .checks import (
+from ...checks import (
     PROG,
     assignments,
     load_value,
@@ -13,7 +13,7 @@ from .checks import (
     times,
     worker_count,
 )
-from .spec import DEFAULT_SWEEP_STEP, UsageError
+from ...spec import DEFAULT_SWEEP_STEP, UsageError
 
 
 def voltage_models(model, args, allowed: tuple) -> tuple[int, ...]:
@@ -37,8 +37,8 @@ def voltage_models(model, args, allowed: tuple) -> tuple[int, ...]:
 
 def circuit_overrides(model, args) -> dict:
     """``--set`` for the load commands; also checks the FMU declares what they read."""
-    from .fmu import ENERGY_OUTPUTS
-    from .load import CONSTANTS
+    from ...circuit import CONSTANTS
+    from ...fmu import ENERGY_OUTPUTS
 
     missing = ([n for n in ENERGY_OUTPUTS if n not in model.outputs]
                + [n for n in CONSTANTS if n not in model.calculated])
@@ -54,9 +54,10 @@ def circuit_overrides(model, args) -> dict:
 
 
 def load_sweep(args) -> int:
-    from . import impacts, load
-    from .fmu import FmuRunError
-    from .spec import check_times, prepare_output_dir
+    from ...fmu import FmuRunError
+    from ...spec import check_times, prepare_output_dir
+    from . import impacts
+    from . import sweep as load
 
     model = open_model(args)
     overrides = circuit_overrides(model, args)
@@ -96,9 +97,10 @@ def load_sweep(args) -> int:
 
 
 def impact_voltage(args) -> int:
-    from . import impacts, load
-    from .fmu import FmuRunError
-    from .spec import prepare_output_dir
+    from ...fmu import FmuRunError
+    from ...spec import prepare_output_dir
+    from . import impacts
+    from . import sweep as load
 
     model = open_model(args)
     overrides = circuit_overrides(model, args)

@@ -18,10 +18,10 @@ from typing import Optional
 import numpy as np
 from fmpy.fmi1 import FMICallException
 
-from .fmu import FmuModel, FmuRunError, Instance
-from .load import MODEL_NAMES, json_text, ohm_text
-from .nominal import write_csv
-from .spec import DEFAULT_STOP_TIME
+from ...fmu import FmuModel, FmuRunError, Instance
+from ...series import write_csv
+from ...spec import DEFAULT_STOP_TIME
+from .sweep import MODEL_NAMES, json_text, ohm_text
 
 #: Sampling of a single impact (s), and the step that finds it (s).
 IMPACT_STEP = 1e-6
@@ -105,7 +105,7 @@ def run_impacts(model: FmuModel, out: Path, instance: Instance, loads: dict, mod
              "impact_count")
     result = {"duration_s": stop_time, "sampling_step_s": step, "window_s": [start, stop], "barrier": side,
               "overrides": overrides, "loads": {}, "fmu": {"path": str(model.path), "guid": model.guid}}
-    from . import curves
+    from . import figures as curves
 
     for label, load in loads.items():
         series, entries = {}, {}

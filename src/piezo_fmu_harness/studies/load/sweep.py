@@ -11,7 +11,7 @@ neighbours (when the best is not at an end of the range). Beside it: the estimat
 (``contact_frequency``) read from the FMU's calculated parameters. Writes ``load_sweep.csv``,
 ``load_sweep.json``, ``load_sweep.md`` and ``load_sweep.png``.
 
-The single impact is in :mod:`piezo_fmu_harness.impacts`.
+The single impact is in :mod:`piezo_fmu_harness.studies.load.impacts`.
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
@@ -26,13 +26,13 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
-from fmpy.fmi1 import FMICallException
 
-from .curves import ohms
-from .engine import InProcess, ProcessPool
-from .fmu import FmuModel, Instance
-from .nominal import write_csv
-from .spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP
+from ...circuit import circuit_constants
+from ...drawing import ohms
+from ...engine import InProcess, ProcessPool
+from ...fmu import FmuModel, Instance
+from ...series import write_csv
+from ...spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP
 
 MODEL_NAMES = {0: "quasi-static (open circuit)", 1: "circuit, one-way", 2: "circuit, coupled"}
 #: The models that harvest energy (model 0 is an open-circuit voltage: nothing flows).
@@ -42,8 +42,6 @@ DEFAULT_MODELS = (1, 2)
 #: 12 s of CPU at 1 kOhm (its cost grows as 1/R; 25 s for all its loads), model 1 about 0.02 s
 #: whatever the load.
 DEFAULT_R_MIN, DEFAULT_R_MAX, DEFAULT_COUNT = 1e3, 1e9, 25
-#: The calculated parameters behind the estimate R_opt ~ 1 / (omega_c C_p).
-CONSTANTS = ("patch_capacitance", "contact_frequency")
 
 
 # -- loads and constants ---------------------------------------------------------------------------
@@ -58,22 +56,6 @@ def log_loads(r_min: float, r_max: float, count: int) -> tuple[float, ...]:
 def ohm_text(value: float) -> str:
     """A resistance as ``52 kOhm``, ``3.59 MOhm``."""
     return ohms(value, "Ohm")
-
-
-def circuit_constants(instance: Instance, values: dict) -> dict:
-    """``C_p``, ``omega_c`` (from the FMU, initialized with ``values``) and the estimate
-    ``R_opt = 1 / (omega_c C_p)``."""
-    try:
-        instance.start(values)
-    except FMICallException as error:
-        raise instance.failure(error) from None
-    read = instance.read(CONSTANTS)
-    capacitance, omega = float(read["patch_capacitance"]), float(read["contact_frequency"])
-    return {
-        "patch_capacitance_F": capacitance,
-        "contact_frequency_rad_per_s": omega,
-        "R_opt_estimate_ohm": 1.0 / (omega * capacitance),
-    }
 
 
 # -- metrics and the optimum -----------------------------------------------------------------------
@@ -203,7 +185,7 @@ def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance
                            "the best load and its two neighbours"),
     }
 
-    from . import curves
+    from . import figures as curves
 
     files["figure"] = curves.load_sweep_figure(rows, summary, out)
     summary["files"] = {key: str(path) for key, path in files.items()}

@@ -1,4 +1,4 @@
-"""The report of ``piezo-fmu optimize`` (:mod:`piezo_fmu_harness.optimize`): ``report.json``,
+"""The report of ``piezo-fmu optimize`` (:mod:`piezo_fmu_harness.studies.optimize.search`): ``report.json``,
 ``report.md``, ``evaluations.csv`` and ``convergence.png``.
 
 The harness reads nothing but the FMU: it never imports the simulation core.
@@ -10,13 +10,15 @@ import json
 from pathlib import Path
 from typing import Optional
 
-from .optimize import EVALUATIONS_FILE, Problem
-from .store import PointStore
+import numpy as np
+
+from ...drawing import new_figure, save_png
+from ...store import PointStore
+from .search import EVALUATIONS_FILE, Problem
 
 
 def write_report(report: dict, problem: Problem, folder: Path, model) -> list[Path]:
     """``report.json``, ``report.md``, ``evaluations.csv`` and ``convergence.png``."""
-    from . import curves
 
     folder = Path(folder)
     (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -29,7 +31,7 @@ def write_report(report: dict, problem: Problem, folder: Path, model) -> list[Pa
              **{f"measure_{k}": v for k, v in (r.get("measures") or {}).items()}, "status": r["status"],
              "seconds": r["seconds"]} for r in records]
     pandas.DataFrame(rows).to_csv(folder / "evaluations.csv", index=False)
-    figure = curves.convergence_figure(records, report, folder / "convergence.png")
+    figure = convergence_figure(records, report, folder / "convergence.png")
     return [folder / "report.json", folder / "report.md", folder / "evaluations.csv", figure]
 
 
@@ -79,3 +81,26 @@ def _formula(problem: Problem) -> str:
     if problem.objective == "perfectibility":
         return f"-100 (w_DI {problem.damping} / DI_ref + w_V V_rms / V_rms_ref)"
     return "w_amplitude peak_with / peak_without + w_transmissibility peak / Y - w_power P_mean / P_ref"
+
+
+def convergence_figure(records: list[dict], report: dict, path: Path) -> Path:
+    """``convergence.png``: the objective of every evaluation of the search in order, the best so
+    far, and the best point of the grid of the same budget."""
+    search = sorted((r for r in records if r.get("phase") == "search"), key=lambda r: r["index"])
+    values = np.array([r["objective"] if r["objective"] is not None else np.nan for r in search], float)
+    values[~np.isfinite(values)] = np.nan
+    fig, ax = new_figure((7.5, 4.2))
+    ax.plot(np.arange(1, len(values) + 1), values, ".", ms=4, color="C0", alpha=0.6, label="evaluations")
+    ax.plot(np.arange(1, len(values) + 1), np.fmin.accumulate(np.where(np.isnan(values), np.inf, values)),
+            color="C3", lw=1.5, label="best so far")
+    grid = report.get("grid")
+    if grid and grid.get("best"):
+        ax.axhline(grid["best"]["objective"], color="k", ls="--", lw=1.0,
+                   label=f"best of the grid of the same budget ({grid['evaluations']} points)")
+    ax.set_xlabel("evaluation (differential evolution, then its polish)")
+    ax.set_ylabel("objective J (minimised)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(f"Optimisation, {report['objective']} objective: {report['search']['evaluations']} evaluations, "
+                 f"{report['search']['wall_s']:.1f} s", fontsize=9)
+    return save_png(fig, path)

@@ -11,7 +11,7 @@ damper) unless given:
   ``--damping ls``) and ``V_rms``, both to be large, over ``stop_time`` from the nominal release.
   ``J = -100 (w_DI DI / DI_ref + w_V V_rms / V_ref)``: with the default weights 0.5 and 0.5,
   ``-J`` is eq. 31's perfectibility with the maxima replaced by the reference values.
-- ``forced`` (harmonic base motion over a band, :mod:`piezo_fmu_harness.frequency_response`; one sweep up
+- ``forced`` (harmonic base motion over a band, :mod:`piezo_fmu_harness.studies.forced.chains`; one sweep up
   with the damper): terms ``amplitude``, the peak steady-state amplitude over the band with the
   damper over the same peak without it (to be small), ``transmissibility``, the peak amplitude over
   ``Y`` (to be small), and ``power``, the mean harvested power over the band over the reference
@@ -23,7 +23,7 @@ damper) unless given:
 A weight may be negative (it turns what its term rewards around) or zero (the term is not
 computed when that saves work).
 
-The report (:mod:`piezo_fmu_harness.optimize_report`) gives the optimum, its sensitivity (one
+The report (:mod:`piezo_fmu_harness.studies.optimize.report`) gives the optimum, its sensitivity (one
 parameter at a time, a step of a fraction of its range each way) and the best point of a
 full-factorial grid of the same budget (as many evaluations as the optimiser needed), so a user
 sees whether the optimiser earned its cost.
@@ -46,9 +46,9 @@ from typing import Optional
 
 import numpy as np
 
-from .fmu import FmuRunError, Instance
-from .frequency_response import FrequencySpec, rest_state, solve_point
-from .store import PointStore, open_folder
+from ...fmu import FmuRunError, Instance
+from ...periodic.band import FrequencySpec, rest_state, solve_point
+from ...store import PointStore, open_folder
 
 HEADER_FILE = "optimize.json"
 EVALUATIONS_FILE = "evaluations.jsonl"

@@ -17,13 +17,12 @@ perfectibility then use it. Eq. 29 stays the default.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
-from .fmu import METRIC_OUTPUTS, METRIC_UNITS, OPTIONAL_METRICS, FmuModel
-from .spec import SweepSpec
+from ...fmu import METRIC_OUTPUTS, METRIC_UNITS, OPTIONAL_METRICS, FmuModel
+from ...spec import SweepSpec
 
 #: The paper's design zones (SI): m 0.17-0.20 kg, d 8-10 mm, x1 0-25 mm (Fig. 9).
 PAPER_ZONES = {"m": (0.17, 0.20), "d": (0.008, 0.010), "x1": (0.0, 0.025)}
@@ -245,23 +244,6 @@ def tidy_frame(ds, quantile: float = DEFAULT_ZONE_QUANTILE):
     return frame
 
 
-def save_dataset(ds, path: Path) -> str:
-    """Write NetCDF with the first engine available (h5netcdf, netCDF4, scipy); return it."""
-    for engine in ("h5netcdf", "netcdf4", "scipy"):
-        try:
-            ds.to_netcdf(path, engine=engine)
-            return engine
-        except (ImportError, ValueError):
-            continue
-    raise RuntimeError("no NetCDF engine: install h5netcdf (with h5py) or netCDF4")
-
-
-def open_dataset(path: Path):
-    import xarray as xr
-
-    return xr.load_dataset(path)
-
-
 def zone_summary_lines(report: dict, show) -> list[str]:
     """Human-readable lines for a zones report; ``show(name, lo, hi=None)`` formats a value or
     a range in display units."""
@@ -286,15 +268,3 @@ def zone_summary_lines(report: dict, show) -> list[str]:
 
 def _fmt(value: Optional[float]) -> str:
     return "n/a" if value is None else f"{value:.1f}"
-
-
-def bands(ratios, mask) -> list[list[float]]:
-    """Runs of consecutive ``True`` in ``mask`` as ``[first ratio, last ratio]``."""
-    runs, start = [], None
-    for k, inside in enumerate(list(mask) + [False]):
-        if inside and start is None:
-            start = k
-        elif not inside and start is not None:
-            runs.append([float(ratios[start]), float(ratios[k - 1])])
-            start = None
-    return runs

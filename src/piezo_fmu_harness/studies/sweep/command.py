@@ -8,8 +8,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from . import presets
-from .checks import (
+from ...checks import (
     PROG,
     assignments,
     interrupt,
@@ -19,50 +18,13 @@ from .checks import (
     times,
     worker_count,
 )
-from .spec import DEFAULT_SWEEP_STEP, UsageError
-
-
-def nominal(args) -> int:
-    from .nominal import NOMINAL_STEP, run_nominal, summary_lines
-    from .spec import prepare_output_dir
-
-    model = open_model(args)
-    overrides = assignments(model, args.set)
-    stop_time, step = times(args, NOMINAL_STEP)
-    out = prepare_output_dir(args.out)
-    unzipdir, instance = preflight(model, [overrides], "--set")
-    try:
-        summary = run_nominal(model, out, stop_time, step, overrides, instance=instance)
-    finally:
-        instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
-    print("\n".join(summary_lines(summary)))
-    return 0
-
-
-def two_designs(args) -> int:
-    from .nominal import NOMINAL_STEP
-    from .spec import prepare_output_dir
-    from .two_designs import DESIGNS, run_two_designs, summary_lines
-
-    model = open_model(args)
-    overrides = assignments(model, args.set)
-    clash = sorted(set(overrides) & {"x1", "m", "d"})
-    if clash:
-        raise UsageError(f"--set {clash[0]}: x1, m and d are what the two designs differ by; they cannot be set")
-    stop_time, step = times(args, NOMINAL_STEP)
-    out = prepare_output_dir(args.out)
-    unzipdir, instance = preflight(model, [{**overrides, **d} for d in DESIGNS.values()], "two designs")
-    instance.free()
-    shutil.rmtree(unzipdir, ignore_errors=True)
-    result = run_two_designs(model, out, stop_time, step, overrides)
-    print("\n".join(summary_lines(result)))
-    return 0
+from ...spec import DEFAULT_SWEEP_STEP, UsageError
+from . import presets
 
 
 def sweep_specs(args, model) -> tuple[list[tuple[str, object, Path]], Optional[dict], Path]:
     """The sweeps asked for: ``[(name, spec, folder)]``, the panels of a preset set, and OUT."""
-    from .spec import build_spec, load_toml, parse_grid
+    from ...spec import build_spec, load_toml, parse_grid
 
     sources = [bool(args.preset), bool(args.config)]
     if sum(sources) > 1:
@@ -105,7 +67,7 @@ def sweep_specs(args, model) -> tuple[list[tuple[str, object, Path]], Optional[d
 
 def sweep(args) -> int:
     from . import analysis
-    from .sweep import display, execute, open_sweep, write_results
+    from .run import display, execute, open_sweep, write_results
 
     model = open_model(args)
     sweeps, panels, out = sweep_specs(args, model)

@@ -1,11 +1,9 @@
 """Contour figures in the paper's units (mm, kg, cm/s, V, W): the sweeps' contours and Figs. 4-9
-with the design zones outlined, and the processes that draw figures in parallel
-(:class:`Rendering`). The line figures (Figs. 3 and 10, the load sweep, the frequency response)
-are in :mod:`piezo_fmu_harness.curves`.
+with the design zones outlined.
 
 Matplotlib runs headless: figures are made without pyplot (``matplotlib.figure.Figure``, written
 by the Agg canvas), so nothing is registered or left to close. Every function writes PNG files
-and returns their paths.
+and returns their paths; :class:`piezo_fmu_harness.drawing.Rendering` draws them in parallel.
 """
 
 from __future__ import annotations
@@ -14,6 +12,8 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+
+from ...drawing import DPI
 
 #: Parameter units shown in the paper's units: lengths in mm.
 UNIT_DISPLAY = {"m": (1e3, "mm")}
@@ -32,12 +32,6 @@ PAPER_FIGURES = {
     "fig7": ("damping", "damping"), "fig8": ("V_rms", "V_rms"), "fig9": ("perfectibility", "perfectibility"),
 }
 ZONE_TITLES = {"damping": "; vibratory-based zone", "V_rms": "; energy-based zone", "perfectibility": "; design zones"}
-
-
-
-#: Resolution of every PNG.
-DPI = 130
-
 
 
 def axis_scale(units: str) -> tuple[float, str]:
@@ -242,51 +236,3 @@ def _paper_figure(sheets: Sheets, panels: dict, figure: str, metric: str, zone_o
     title = METRIC_DISPLAY[_measure(next(iter(panels.values()))[0], metric)][2]
     return sheets[len(panels)].draw(drawn, f"{figure.replace('fig', 'Fig. ')}: {title}"
                                            f"{ZONE_TITLES.get(zone_of or '', '')}", path)
-
-
-class Rendering:
-    """Figure calls (``(function, *args)``, each returning the path it wrote, its last argument)
-    being drawn: in ``jobs`` forked processes where the platform forks, while this process does
-    something else, or here at :meth:`wait`.
-
-    A forked child copies only the thread that forked; it draws with matplotlib (imported, with
-    its fonts loaded, before the fork: nothing is imported or pickled again) and writes its files,
-    which no other thread of this process does, so it needs no lock another thread may hold."""
-
-    def __init__(self, calls: list[tuple], jobs: int = 1):
-        import multiprocessing
-
-        self.calls = calls
-        self.children = []
-        jobs = min(jobs, len(calls))
-        if jobs >= 2 and "fork" in multiprocessing.get_all_start_methods():
-            context = multiprocessing.get_context("fork")
-            self.children = [context.Process(target=_render_share, args=(calls, start, jobs), daemon=True)
-                             for start in range(jobs)]
-            for child in self.children:
-                child.start()
-
-    def wait(self) -> list[Path]:
-        """The paths written, once every figure is."""
-        if not self.children:
-            return [call[0](*call[1:]) for call in self.calls]
-        for child in self.children:
-            child.join()
-        failed = [child.exitcode for child in self.children if child.exitcode != 0]
-        if failed:
-            raise RuntimeError(f"figure writing failed in {len(failed)} of {len(self.children)} processes "
-                               f"(exit codes {failed})")
-        return [call[-1] for call in self.calls]
-
-
-def _render_share(calls: list[tuple], start: int, stride: int) -> None:
-    import os
-    import traceback
-
-    try:
-        for call in calls[start::stride]:
-            call[0](*call[1:])
-    except BaseException:  # noqa: BLE001 - reported through the exit code
-        traceback.print_exc()
-        os._exit(1)
-    os._exit(0)  # no interpreter teardown in a forked child: the parent owns every resource

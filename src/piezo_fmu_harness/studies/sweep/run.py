@@ -23,10 +23,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
+from ...datasets import save_dataset
+from ...drawing import Rendering
+from ...fmu import FmuModel
+from ...spec import SweepSpec, UsageError
+from ...store import SPEC_FILE, PointStore, open_folder
 from . import analysis, figures
-from .fmu import FmuModel
-from .spec import SweepSpec, UsageError
-from .store import SPEC_FILE, PointStore, open_folder
 
 
 @dataclass
@@ -125,7 +127,7 @@ def write_results(model: FmuModel, runs: list[SweepRun], names: list[str], panel
     else:
         calls = [call for result in results.values() for call in result["figures"]]
     built = time.perf_counter()
-    rendering = figures.Rendering(calls, jobs)
+    rendering = Rendering(calls, jobs)
     for result in results.values():
         result["write"]()
     written = time.perf_counter()
@@ -141,7 +143,7 @@ def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZO
     """The results of one finished sweep, not yet written: ``{"dataset", "zones", "masks",
     "paper_zone", "files", "figures"}``. ``files`` are written by ``write`` (a function of no
     argument, under the key ``write``); ``figures`` are the calls that draw the contours (and
-    Eq. 29's DI beside DI_ls when the sweep ranks by DI_ls), for :class:`piezo_fmu_harness.figures.Rendering`."""
+    Eq. 29's DI beside DI_ls when the sweep ranks by DI_ls), for :class:`piezo_fmu_harness.drawing.Rendering`."""
     ds = analysis.build_dataset(run.spec, run.done, model, damping)
     zones = analysis.zones_report(ds, quantile)
     masks = {metric: analysis.top_zone(ds, metric, quantile)[0] for metric in analysis.zone_kinds(ds)}
@@ -149,7 +151,7 @@ def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZO
     files = [run.folder / "sweep.nc", run.folder / "sweep.csv", run.folder / "zones.json"]
 
     def write() -> None:
-        analysis.save_dataset(ds, files[0])
+        save_dataset(ds, files[0])
         analysis.tidy_frame(ds, quantile).to_csv(files[1], index=False)
         files[2].write_text(json.dumps(zones, indent=2) + "\n")
 

@@ -1,0 +1,73 @@
+"""The options that several studies share, each a function that adds them to a subcommand's
+parser: the FMU and its parameters, the simulated time, the band of harmonic base motion, the
+results folder, the workers and the engine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .spec import DEFAULT_STOP_TIME
+
+
+def model_options(sub) -> None:
+    """``--set`` and ``--fmu``."""
+    sub.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                     help="set an FMU parameter (SI), repeatable")
+    sub.add_argument("--fmu", type=Path, default=None,
+                     help="the FMU (default $PIEZO_FMU, else the FMI 2.0 FMU installed with the package)")
+
+
+def common(sub, step_default: float, step_help: str) -> None:
+    """``--stop-time``, ``--step`` and the model's options."""
+    sub.add_argument("--stop-time", type=float, default=None, metavar="S",
+                     help=f"duration simulated, s (default {DEFAULT_STOP_TIME:g})")
+    sub.add_argument("--step", type=float, default=None, metavar="S",
+                     help=f"communication step, s (default {step_default:g}; {step_help})")
+    model_options(sub)
+
+
+def band_options(sub, defaults: dict) -> None:
+    """The harmonic base motion, the band of frequencies and the steady-state settings."""
+    amplitude = sub.add_mutually_exclusive_group()
+    amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
+                           help="base displacement amplitude Y, m (default 1e-3)")
+    amplitude.add_argument("--acceleration", type=float, default=None, metavar="M/S2",
+                           help="base acceleration amplitude A, m/s^2 (then Y = A / w^2 at each frequency)")
+    for option, kind, metavar, text in (
+            ("--ratio-min", float, "R", f"lowest frequency, as w / sqrt(K/M) (default {defaults['ratios'][0]:g})"),
+            ("--ratio-max", float, "R", f"highest frequency, as w / sqrt(K/M) (default {defaults['ratios'][1]:g})"),
+            ("--count", int, "N", f"frequencies, evenly spaced (default {defaults['count']})"),
+            ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p), near the optimum)"),
+            ("--voltage-model", int, "N", "0 quasi-static (nothing harvested), 1 circuit one-way, 2 circuit "
+                                          "coupled (default 1)"),
+            ("--samples", int, "N", "communication steps per forcing period (default 64)"),
+            ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
+            ("--max-cycles", int, "N", f"cap on the forcing cycles simulated per frequency (default "
+                                       f"{defaults['max_cycles']})"),
+            ("--newton-iterations", int, "N", "Newton iterations per shooting attempt; 0 marches in time only "
+                                              "(default 12)")):
+        sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+
+
+def results_folder(sub, name: str) -> None:
+    """``--out``, by default ``results/NAME``."""
+    sub.add_argument("--out", type=Path, default=Path("results") / name, metavar="DIR",
+                     help=f"results folder (default results/{name})")
+
+
+def jobs(sub) -> None:
+    """``--jobs``."""
+    sub.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+
+
+def engine(sub) -> None:
+    """Where the points run, and what to do with a folder that holds some already."""
+    jobs(sub)
+    where = sub.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
+    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
+    again = sub.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="finish the run in --out: run only the points not yet recorded")
+    again.add_argument("--force", action="store_true", help="start over, discarding the points in --out")
+    sub.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,11 @@
+"""The damper under harmonic base motion, shared by the studies of the forced response (the
+frequency response, the continuation, the optimiser's forced objective):
+
+- :mod:`.drive`: the FMU driven by the base ``y = Y sin(w t + phi)``, the section state and the
+  measures of an orbit;
+- :mod:`.steady_state`: the steady state at one frequency, a stable orbit or a motion that is not
+  periodic;
+- :mod:`.stability`: the Floquet multipliers of an orbit;
+- :mod:`.band`: a band of frequencies as the options ask for it, and one frequency's steady state as
+  a task of the sweep engine.
+"""

@@ -1,0 +1,45 @@
+"""Continuation (issue 23): the branches of periodic orbits of the forced response, followed
+through their folds by pseudo-arclength continuation, with their stability and bifurcations
+(``piezo-fmu continuation``).
+
+- :mod:`.tracer`: the method, one branch at a time;
+- :mod:`.branches`: a branch from a seed, its bifurcations, the period-doubled branches;
+- :mod:`.study`: the seeds, the branches on the engine, the results and the command;
+- :mod:`.figure`: the branches over the sweeps.
+"""
+
+from __future__ import annotations
+
+
+def register(commands) -> None:
+    """``piezo-fmu continuation``."""
+    from ...options import band_options, jobs, model_options, results_folder
+    from . import study as cs
+    from .tracer import Settings
+
+    continuation = commands.add_parser(
+        "continuation", help="branches of periodic orbits followed through their folds, with their bifurcations",
+        description="Seed with a sweep up and down (the frequency response's shooting, with the damper), then follow "
+                    "every orbit with impacts by pseudo-arclength continuation in the frequency ratio (or Y, or a "
+                    "damper parameter), through folds, naming the bifurcations (fold, period doubling, "
+                    "Neimark-Sacker, grazing). Writes continuation.nc, branches.csv, events.csv, summary.json and "
+                    "continuation.png.")
+    continuation.add_argument("--parameter", default="ratio", metavar="NAME",
+                              help="the continued parameter: ratio (default), Y, or a Real damper parameter")
+    continuation.add_argument("--range", default=None, metavar="LO:HI", help="its range (not for ratio)")
+    continuation.add_argument("--ratio", type=float, default=1.0, metavar="R",
+                              help="w / sqrt(K/M) held fixed when the parameter is not the ratio (default 1)")
+    continuation.add_argument("--max-points", type=int, default=Settings().max_points, metavar="N",
+                              help="points a branch may have in each direction (default %(default)s)")
+    continuation.add_argument("--max-branches", type=int, default=cs.MAX_BRANCHES, metavar="N",
+                              help="branches followed at most (default %(default)s)")
+    band_options(continuation, cs.SEED_DEFAULTS)
+    model_options(continuation)
+    results_folder(continuation, "continuation")
+    jobs(continuation)
+    where = continuation.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
+    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
+    continuation.add_argument("--force", action="store_true", help="replace the results in --out")
+    continuation.add_argument("--no-progress", action="store_true", help="(no progress bar is drawn)")
+    continuation.set_defaults(run=cs.command)
