@@ -26,7 +26,7 @@ system-deps:
 # Builds both FMUs from src/ (byte-identical to the committed ones, under a second), then runs
 # the nominal case through the FMI 2.0 FMU with fmpy.
 nominal: system-deps $(STAMP)
-	$(BIN)/python -m piezo_fmu.fmi.build
+	$(BIN)/python -m piezo_fmu.build
 	$(BIN)/piezo-fmu nominal
 
 sweep: $(STAMP)
@@ -59,7 +59,7 @@ dist: $(STAMP)
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
 # The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
 fmu: $(STAMP)
-	$(BIN)/python -m piezo_fmu.fmi.build
+	$(BIN)/python -m piezo_fmu.build
 	$(BIN)/python crosscheck/run_crosscheck.py --write
 
 crosscheck: system-deps $(STAMP)
@@ -69,7 +69,7 @@ hosts: system-deps $(STAMP)
 	$(BIN)/python hosts/coupled.py
 
 fmu-check: $(STAMP)
-	$(BIN)/python -m piezo_fmu.fmi.build --check
+	$(BIN)/python -m piezo_fmu.build --check
 
 bench: bench-core bench-fmu bench-sweep bench-me bench-forced
 

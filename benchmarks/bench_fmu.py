@@ -55,9 +55,9 @@ def time_run(unzipdir: str, model_description) -> tuple[float, float]:
 
 def write_floors(version: int, with_loader: Path, without_loader: Path) -> None:
     """The no-work FMU, and the same with pythonfmu's binary where the loader is (child process only)."""
-    from piezo_fmu.fmi.archive import deterministic_zip
-    from piezo_fmu.fmi.build import TARGETS, build_bytes
-    from piezo_fmu.fmi.loader import REAL_SUFFIX
+    from piezo_fmu.build.archive import deterministic_zip
+    from piezo_fmu.build.fmus import TARGETS, build_bytes
+    from piezo_fmu.build.loader import REAL_SUFFIX
 
     data = build_bytes(TARGETS[version], FLOOR_SLAVES[version], (HERE / "no_core.py",))
     with_loader.write_bytes(data)

@@ -1,7 +1,7 @@
 #!/bin/sh
 # Launcher that puts libpython into a native (non-Python) FMI host, for those who prefer to
 # choose the interpreter this way. No host needs it any more: the project's FMUs find a Python
-# themselves (their loader, src/piezo_fmu/fmi/loader; see docs/simulators.md). It remains for
+# themselves (their loader, src/piezo_fmu/build/loader; see docs/simulators.md). It remains for
 # other pythonfmu FMUs, whose binary calls the Python C API but does not link libpython and so
 # loads only into a process that has libpython's symbols.
 #

@@ -25,7 +25,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 from fmpy.logging import addLoggerProxy
 
 from piezo_fmu import Parameters, Simulator, parameter_info
-from piezo_fmu.fmi import build as fmu_build
+from piezo_fmu.build import fmus as fmu_build
 from piezo_fmu.fmi.variables import OUTPUTS
 from fmu_host import read_outputs, set_values
 

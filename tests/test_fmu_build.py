@@ -24,7 +24,9 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from piezo_fmu.fmi import archive, build, variables
+from piezo_fmu.build import archive
+from piezo_fmu.build import fmus as build
+from piezo_fmu.fmi import variables
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = [build.FMI2, build.FMI3]

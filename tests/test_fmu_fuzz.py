@@ -55,7 +55,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from piezo_fmu import EXPLICIT, Parameters, derive_barrier, parameter_info
-from piezo_fmu.fmi import archive
+from piezo_fmu.build import archive
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"

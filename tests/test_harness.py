@@ -40,7 +40,7 @@ def fmu(tmp_path_factory) -> Path:
     if path.is_file():
         return path
     dest = tmp_path_factory.mktemp("fmu") / "PiezoImpactDamper.fmu"
-    subprocess.run([sys.executable, "-m", "piezo_fmu.fmi.build", "--fmi", "2", "--dest", str(dest)], check=True, cwd=ROOT)
+    subprocess.run([sys.executable, "-m", "piezo_fmu.build", "--fmi", "2", "--dest", str(dest)], check=True, cwd=ROOT)
     return dest
 
 

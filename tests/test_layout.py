@@ -1,7 +1,9 @@
 """The shape of the code: the physics apart from the numerics, and both apart from FMI.
 
-- Imports run one way: ``piezo_fmu.fmi`` may import the solver and the model, the solver may
-  import the model, and the model imports neither; the harness never imports the core at all.
+- Imports run one way: ``piezo_fmu.build`` may import the FMI layer, ``piezo_fmu.fmi`` the solver and
+  the model, the solver the model, and the model neither; the harness never imports the core at all.
+- ``piezo_fmu.fmi`` holds only what ships inside the FMUs (issue 22): every module there is a slave
+  script or lies under the FMUs' ``resources/``, and what builds the FMUs is in ``piezo_fmu.build``.
 - No import cycle between modules, inside the package or the harness (lazy imports in functions
   count too).
 - No module over 400 lines, no class over 250.
@@ -25,7 +27,7 @@ PACKAGE = ROOT / "src" / "piezo_fmu"
 HARNESS = ROOT / "src" / "piezo_fmu_harness"
 MAX_MODULE_LINES = 400
 MAX_CLASS_LINES = 250
-LAYERS = {"model": 0, "solver": 1, "fmi": 2}
+LAYERS = {"model": 0, "solver": 1, "fmi": 2, "build": 3}
 
 
 def module_name(path: Path) -> str:
@@ -181,3 +183,41 @@ def test_a_study_is_one_line_in_the_registry():
     registered = {f.__module__.rsplit(".", 1)[0] if f.__module__.count(".") > 2 else f.__module__ for f in studies.REGISTRY}
     packages = {study_of(m) for m in harness_modules()} - {None}
     assert registered == packages, (registered, packages)
+
+
+# -- the FMU's runtime apart from its build -----------------------------------------------------------
+
+FMUS = [ROOT / "fmus" / "PiezoImpactDamper.fmu", ROOT / "fmus" / "PiezoImpactDamper3.fmu"]
+SLAVE_SCRIPTS = {"fmi2.py": FMUS[0], "fmi3.py": FMUS[1]}
+
+
+def test_every_module_of_piezo_fmu_fmi_ships_inside_an_fmu():
+    import zipfile
+
+    shipped = set()
+    for fmu in FMUS:
+        with zipfile.ZipFile(fmu) as archive:
+            shipped |= {name for name in archive.namelist() if name.startswith("resources/")}
+    for path in sources(PACKAGE / "fmi"):
+        relative = path.relative_to(PACKAGE).as_posix()
+        if path.name in SLAVE_SCRIPTS:
+            with zipfile.ZipFile(SLAVE_SCRIPTS[path.name]) as archive:
+                scripts = [n for n in archive.namelist() if n.startswith("resources/") and n.endswith(".py")
+                           and "/" not in n[len("resources/"):]]
+                assert any(archive.read(n) == path.read_bytes() for n in scripts), f"{relative} is not a slave script"
+        else:
+            assert f"resources/piezo_fmu/{relative}" in shipped, f"{relative} does not ship inside an FMU"
+
+
+def test_nothing_that_builds_the_fmus_ships_inside_them():
+    import zipfile
+
+    for fmu in FMUS:
+        with zipfile.ZipFile(fmu) as archive:
+            names = archive.namelist()
+        assert not any(name.startswith("resources/piezo_fmu/build") for name in names), fmu.name
+    builders = {module_name(p) for p in sources(PACKAGE / "build")}
+    assert {"piezo_fmu.build.fmus", "piezo_fmu.build.archive", "piezo_fmu.build.description",
+            "piezo_fmu.build.loader"} <= builders
+    for path in sources(PACKAGE / "fmi"):
+        assert not {m for m in imports(path) if m.startswith("piezo_fmu.build")}, path.name

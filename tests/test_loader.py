@@ -1,4 +1,4 @@
-"""The FMUs' own binary, the loader (``src/piezo_fmu/fmi/loader``): drop-in and conformant.
+"""The FMUs' own binary, the loader (``src/piezo_fmu/build/loader``): drop-in and conformant.
 
 1. Any native host loads the FMUs with no launcher: the C host (``hosts/native_host.c``) runs
    them in a bare environment (``tests/test_host_model.py`` shows the damper's nominal case bit
@@ -37,9 +37,9 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from hosts import native  # noqa: E402
-from piezo_fmu.fmi import archive as fmu_archive  # noqa: E402
-from piezo_fmu.fmi.loader import LINUX_BINARIES, REAL_SUFFIX, compile_loader, install_loader  # noqa: E402
-from piezo_fmu.fmi.loader.generate import api, pythonfmu3_unimplemented  # noqa: E402
+from piezo_fmu.build import archive as fmu_archive  # noqa: E402
+from piezo_fmu.build.loader import LINUX_BINARIES, REAL_SUFFIX, compile_loader, install_loader  # noqa: E402
+from piezo_fmu.build.loader.generate import api, pythonfmu3_unimplemented  # noqa: E402
 from tests.loader_slaves import SLAVE_2, SLAVE_3, SOURCE_2, SOURCE_3  # noqa: E402
 
 FMU = REPO / "fmus" / "PiezoImpactDamper.fmu"
@@ -278,7 +278,7 @@ def test_in_fmpy_any_other_exception_stays_fatal(tiny, tmp_path, version):
 @pytest.mark.parametrize("version", [2, 3])
 def test_an_instance_keeps_its_references_through_refusals_and_exceptions(tiny, tmp_path, version):
     """pythonfmu's exception handler released the slave, its class and its log queue at every
-    exception while the instance kept using them (see ``piezo_fmu.fmi.archive.keep_references_on_exception``;
+    exception while the instance kept using them (see ``piezo_fmu.build.archive.keep_references_on_exception``;
     shown below on the binary as shipped): three exceptions emptied the log queue's count, ten
     crashed the process. The project's slaves raise none (a refusal is logged), and the build mends
     the binary for what else might: 100 refusals and 100 exceptions, a garbage collection, a reset
@@ -407,4 +407,4 @@ def test_the_committed_fmus_have_the_loader_and_pythonfmus_binary_beside_it(vers
     assert f"{binary}{REAL_SUFFIX}" in names
     assert windows in names  # pythonfmu's, which finds python3.dll itself
     assert loader == compile_loader(version)
-    assert not any(name.startswith("resources/piezo_fmu/fmi/loader") for name in names)
+    assert not any(name.startswith("resources/piezo_fmu/build/loader") for name in names)

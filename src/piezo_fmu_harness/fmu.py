@@ -116,7 +116,7 @@ class FmuModel:
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(
-                f"FMU not found at {self.path}; build it with `python -m piezo_fmu.fmi.build` "
+                f"FMU not found at {self.path}; build it with `python -m piezo_fmu.build` "
                 f"or point --fmu (or ${FMU_ENV}) at it")
         self.model_description = read_model_description(str(self.path), validate=False)
         self.guid = self.model_description.guid

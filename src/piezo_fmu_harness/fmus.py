@@ -59,4 +59,4 @@ def path(fmi_version: int = 2) -> Path:
         if (folder / name).is_file():
             return folder / name
     raise FileNotFoundError(f"{name} is in none of {', '.join(str(f) for f in _FOLDERS)}; "
-                            "reinstall piezo-fmu, or build the FMU with `python -m piezo_fmu.fmi.build`")
+                            "reinstall piezo-fmu, or build the FMU with `python -m piezo_fmu.build`")

@@ -4,7 +4,7 @@ Neither builder writes units, ``min``/``max`` or full-precision start values (py
 ``InitialUnknowns`` either), and both stamp the build time and a random identity. The build fixes
 all of it from :data:`piezo_fmu.fmi.variables.VARIABLES` (and, for FMI 3.0, the variables of the
 other interfaces), so that every FMU says the same of each variable and is byte-reproducible; the
-identity is set afterwards from the content (:func:`piezo_fmu.fmi.archive.content_identity`).
+identity is set afterwards from the content (:func:`piezo_fmu.build.archive.content_identity`).
 """
 
 from __future__ import annotations

@@ -2,9 +2,9 @@
 
 Usage (from the repository root)::
 
-    python -m piezo_fmu.fmi.build            # (re)write fmus/PiezoImpactDamper.fmu and fmus/PiezoImpactDamper3.fmu
-    python -m piezo_fmu.fmi.build --check    # exit 1 if a committed FMU is stale
-    python -m piezo_fmu.fmi.build --fmi 3 --dest other.fmu   # one FMU, elsewhere
+    python -m piezo_fmu.build            # (re)write fmus/PiezoImpactDamper.fmu and fmus/PiezoImpactDamper3.fmu
+    python -m piezo_fmu.build --check    # exit 1 if a committed FMU is stale
+    python -m piezo_fmu.build --fmi 3 --dest other.fmu   # one FMU, elsewhere
 
 Two FMUs, one model:
 
@@ -14,12 +14,12 @@ Two FMUs, one model:
 
 The builders make the archives; this module then completes and freezes them: the
 modelDescription gets the units, bounds, exact starts and structure of the variable table
-(:mod:`piezo_fmu.fmi.description`), an identity derived from the content, and the archive is
+(:mod:`piezo_fmu.build.description`), an identity derived from the content, and the archive is
 written with sorted entries, fixed timestamps and modes, stored uncompressed, without
-``__pycache__`` (:mod:`piezo_fmu.fmi.archive`). A rebuild from the same sources is byte-identical,
+``__pycache__`` (:mod:`piezo_fmu.build.archive`). A rebuild from the same sources is byte-identical,
 which is what ``--check`` relies on.
 
-Each FMU's linux binary is the project's loader (:mod:`piezo_fmu.fmi.loader`, compiled here: it
+Each FMU's linux binary is the project's loader (:mod:`piezo_fmu.build.loader`, compiled here: it
 finds a Python for a native host and returns Error for a refused call); pythonfmu's binary,
 mended, is kept beside it as ``<modelIdentifier>.pythonfmu.so``.
 
@@ -45,15 +45,14 @@ from typing import Callable, Optional
 import pythonfmu
 import pythonfmu3
 
-from piezo_fmu.fmi import archive, description
-from piezo_fmu.fmi.loader import install_loader
+from piezo_fmu.build import archive, description
+from piezo_fmu.build.loader import install_loader
 from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: Files and folders of the package that no FMU needs at run time (each slave travels as its own
 #: module; the loader's sources become the FMUs' linux binary).
-NOT_BUNDLED = frozenset({"fmi/build.py", "fmi/fmi2.py", "fmi/fmi3.py", "fmi/archive.py", "fmi/description.py",
-                         "fmi/loader"})
+NOT_BUNDLED = frozenset({"fmi/fmi2.py", "fmi/fmi3.py", "build"})
 
 
 @dataclass(frozen=True)
@@ -195,7 +194,7 @@ def check(target: Target = FMI2, dest: Optional[Path] = None) -> list[str]:
 
 
 def main(argv: Optional[list[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m piezo_fmu.fmi.build", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m piezo_fmu.build", description=__doc__.split("\n\n")[0])
     parser.add_argument("--fmi", type=int, choices=sorted(TARGETS), action="append",
                         help="the FMI version of the FMU to build (repeat for both; default: both)")
     parser.add_argument("--dest", type=Path, help="FMU path (only with one --fmi; default fmus/<modelIdentifier>.fmu)")

@@ -1,0 +1,10 @@
+"""What builds the FMUs on the developer's machine, apart from what ships inside them
+(:mod:`piezo_fmu.fmi`):
+
+- :mod:`.fmus`: the reproducible build of both FMUs (``python -m piezo_fmu.build``);
+- :mod:`.description`: the completion of each modelDescription from the variable table;
+- :mod:`.archive`: the deterministic archive and the patches to pythonfmu's binaries;
+- :mod:`.loader`: the FMUs' own binary, a loader in front of pythonfmu's (C, compiled here).
+
+Nothing here is imported by an FMU at run time.
+"""
