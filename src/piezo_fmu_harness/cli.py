@@ -1,5 +1,5 @@
-"""``piezo-fmu``: the nominal case, sweeps, the two designs, the load, the frequency response and
-the optimiser, all through the FMU with fmpy.
+"""``piezo-fmu``: the nominal case, sweeps, the two designs, the load, the frequency response, its
+continuation and the optimiser, all through the FMU with fmpy.
 
     piezo-fmu nominal [--out DIR] [--stop-time S] [--step S] [--set NAME=VALUE ...]
     piezo-fmu sweep (--grid NAME=START:STOP:COUNT ... | --preset NAME | --config FILE.toml)
@@ -13,6 +13,9 @@ the optimiser, all through the FMU with fmpy.
                                  [--load OHM] [--voltage-model N] [--set NAME=VALUE ...] [--samples N]
                                  [--tolerance TOL] [--max-cycles N] [--newton-iterations N] [--out DIR]
                                  [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
+    piezo-fmu continuation [--parameter ratio|Y|NAME] [--range LO:HI] [--ratio R] [--max-points N]
+                           [--max-branches N] [frequency-response's band options] [--out DIR] [--jobs N]
+                           [--scheduler ADDRESS | --dask-local] [--force]
     piezo-fmu optimize --param NAME=LO:HI ... [--objective perfectibility|forced] [--weight TERM=W ...]
                        [--reference TERM=VALUE ...] [--damping eq29|ls] [--maxiter N] [--popsize N] [--seed N]
                        [--polish] [--no-grid] [--sensitivity-step F] [frequency-response's band options]
