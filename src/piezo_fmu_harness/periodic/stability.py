@@ -32,7 +32,7 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
@@ -182,3 +182,23 @@ def floquet(period_map: Callable, x, scale: np.ndarray, size: float, neutral: bo
     real = np.real(vector) if np.max(np.abs(np.real(vector))) >= np.max(np.abs(np.imag(vector))) else np.imag(vector)
     real = real / real[int(np.argmax(np.abs(real)))]
     return Floquet(tuple(multipliers), 2 if neutral else 0, largest, error, real / scale, h)
+
+
+@dataclass
+class Orbit:
+    """A verified periodic orbit with its stability and measures."""
+
+    state: np.ndarray
+    phase: float
+    order: int
+    sections: list  # (phase, the orbit's states at that phase), for each section it was seen at
+    return_error: float
+    method: str
+    floquet: Floquet
+    checked_at: tuple  # (state, phase) where the multipliers were computed
+    measures: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """JSON-safe: where the orbit is, its measures and its multipliers."""
+        return {"order": self.order, "state": [float(v) for v in self.state], "phase": float(self.phase),
+                "method": self.method, "return_error": self.return_error, **self.measures, **self.floquet.to_record()}

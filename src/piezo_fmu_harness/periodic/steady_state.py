@@ -26,7 +26,9 @@ examined twice). Each side gets half of the cycles left.
 **Not periodic.** When the cap on simulated cycles is reached with no stable orbit, the motion is
 reported as not periodic, with measures over a window of ``window_cycles`` forcing periods marched
 on from where the search stood: the amplitude envelope (the smallest and largest half peak-to-peak
-of one period), the mean power and the impacts per cycle; no single orbit's numbers.
+of one period), the mean power and the impacts per cycle; no single orbit's numbers. It is then
+classified (chaotic, quasi-periodic, strongly modulated, or a transient still converging) over
+``classify_cycles`` more, by its largest Lyapunov exponent and its modulation.
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
@@ -34,14 +36,15 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
 from .drive import HarmonicDrive, measure
+from .motion import classify
 from ..fmu import FmuRunError
-from .stability import Floquet, floquet
+from .stability import Floquet, Orbit, floquet
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,9 @@ class Settings:
         Forcing cycles marched between Newton attempts.
     window_cycles : int
         Forcing cycles over which a motion that is not periodic is measured.
+    classify_cycles : int
+        Forcing cycles after the window over which such a motion is classified
+        (:mod:`piezo_fmu_harness.periodic.motion`).
     """
 
     samples: int = 64
@@ -78,6 +84,7 @@ class Settings:
     warmup_cycles: int = 2
     march_cycles: int = 8
     window_cycles: int = 60
+    classify_cycles: int = 40
 
     #: Newton attempts per search: at its start, then after 1, 3, 7, ... blocks of marching (a
     #: transient that decays slowly, as at zeta = 0.0016, gets late attempts near its end).
@@ -90,26 +97,6 @@ class Settings:
     ESCAPE_STEP = 1e-2
     #: Unstable orbits the search escapes from, at most, per frequency.
     MAX_ESCAPES = 4
-
-
-@dataclass
-class Orbit:
-    """A verified periodic orbit with its stability and measures."""
-
-    state: np.ndarray
-    phase: float
-    order: int
-    sections: list  # (phase, the orbit's states at that phase), for each section it was seen at
-    return_error: float
-    method: str
-    floquet: Floquet
-    checked_at: tuple  # (state, phase) where the multipliers were computed
-    measures: dict = field(default_factory=dict)
-
-    def record(self) -> dict:
-        """JSON-safe: where the orbit is, its measures and its multipliers."""
-        return {"order": self.order, "state": [float(v) for v in self.state], "phase": float(self.phase),
-                "method": self.method, "return_error": self.return_error, **self.measures, **self.floquet.to_record()}
 
 
 class Shooting:
@@ -377,7 +364,9 @@ class SteadyState(Shooting):
         return None
 
     def _settled(self, orbit: Orbit) -> dict:
-        return {"settled": True, **orbit.record(), **self._bookkeeping(orbit.state, orbit.phase)}
+        sections = [[float(v) for v in state] for state in orbit.sections[0][1]]
+        return {"settled": True, **orbit.record(), "motion": "periodic", "sections": sections,
+                **self._bookkeeping(orbit.state, orbit.phase)}
 
     def _not_periodic(self) -> dict:
         """No stable orbit within the cap: the motion measured over a long window from where the
@@ -386,8 +375,9 @@ class SteadyState(Shooting):
         bookkeeping = self._bookkeeping(drive.state(), drive.phase)
         measures = measure(drive, self.settings.window_cycles)
         bookkeeping.update(state=[float(v) for v in drive.state()], phase=float(drive.phase))  # after the window
+        motion = classify(drive, self.settings.classify_cycles)
         return {"settled": False, "method": "none", "order": None, "return_error": None, "verdict": "not periodic",
-                "stable": False, **measures, **bookkeeping}
+                "stable": False, **measures, **motion, **bookkeeping}
 
     def _bookkeeping(self, x, phase: float) -> dict:
         """The cycles spent finding, checking and verifying the steady state (the measured ones come

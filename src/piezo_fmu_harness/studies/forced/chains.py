@@ -65,6 +65,8 @@ MEASURES = {
     "stability_margin": ("1", "1 - max_multiplier"),
     "multiplier_error": ("1", "|max_multiplier at step h - at step 4h|: the accuracy of the multipliers"),
     "unstable_orbits": ("1", "unstable periodic orbits met on the way at this frequency (unstable_orbits.csv)"),
+    "lyapunov_exponent": ("1/period", "largest Lyapunov exponent of a motion that is not periodic, per forcing period"),
+    "modulation": ("1", "amplitude modulation of a motion that is not periodic: (largest - smallest) / largest"),
     "seconds": ("s", "wall time of the point in its worker"),
 }
 

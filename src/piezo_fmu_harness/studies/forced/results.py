@@ -32,6 +32,7 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
     settled = np.zeros(shape, dtype=np.int8)
     method = np.full(shape, "missing", dtype=object)
     verdict = np.full(shape, "missing", dtype=object)
+    motion = np.full(shape, "missing", dtype=object)
     error = np.full(shape, "", dtype=object)
     multipliers = np.full(shape + (4,), complex(np.nan, np.nan))
     for chain, (damper, direction) in enumerate(CHAINS):
@@ -50,6 +51,7 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
             settled[where] = bool(record.get("settled"))
             method[where] = record.get("method") if record["status"] == "ok" else "error"
             verdict[where] = record.get("verdict", "error") if record["status"] == "ok" else "error"
+            motion[where] = record.get("motion", "error") if record["status"] == "ok" else "error"
             error[where] = record.get("error") or ""
             for k, (real, imag) in enumerate(record.get("multipliers") or ()):
                 multipliers[(*where, k)] = complex(real, imag)
@@ -65,6 +67,9 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
                                                                    "(the FMU rejected the point) or missing"})
     variables["verdict"] = (dims, verdict.astype(str), {"long_name": "stable (the response is a stable orbit), not "
                                                                      "periodic, error or missing"})
+    variables["motion"] = (dims, motion.astype(str), {"long_name": "periodic (a stable orbit), or what a motion that is "
+                                                                   "not periodic is: quasi-periodic, strongly "
+                                                                   "modulated, chaotic, transient"})
     for part, values in (("real", multipliers.real), ("imag", multipliers.imag)):
         variables[f"multiplier_{part}"] = (dims + ("multiplier",), values,
                                            {"units": "1", "long_name": f"{part} part of the orbit's Floquet multipliers, "
@@ -172,7 +177,8 @@ def summarize(ds) -> dict:
         report["jump_bands"][damper] = bands(ratios, ds["directions_differ"].values[i] == 1)
         for j, direction in enumerate(DIRECTIONS):
             key = f"{damper} the damper, sweep {direction}"
-            report["not_periodic"][key] = [float(r) for r in ratios[verdict[i, j] == "not periodic"]]
+            loose = verdict[i, j] == "not periodic"
+            report["not_periodic"][key] = {f"{r:.6g}": str(m) for r, m in zip(ratios[loose], ds["motion"].values[i, j][loose])}
             met = ((ds["unstable_damper"].values == damper) & (ds["unstable_direction"].values == direction))
             report["unstable_orbits_met"][key] = {
                 "count": int(met.sum()),
@@ -237,7 +243,7 @@ def summary_lines(report: dict) -> list[str]:
     unsettled = {key: values for key, values in report["not_periodic"].items() if values}
     for key, values in unsettled.items():
         lines.append(f"  not periodic (no stable orbit within the cap; measured over a window) {key}: "
-                     f"{len(values)} points, at w/w_n " + ", ".join(f"{v:.4g}" for v in values))
+                     f"{len(values)} points, at w/w_n " + ", ".join(f"{r} ({m})" for r, m in values.items()))
     for key, met in report["unstable_orbits_met"].items():
         if met["count"]:
             lines.append(f"  unstable orbits met and set aside {key}: {met['count']} "
