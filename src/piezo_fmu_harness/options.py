@@ -71,3 +71,13 @@ def engine(sub) -> None:
                        help="finish the run in --out: run only the points not yet recorded")
     again.add_argument("--force", action="store_true", help="start over, discarding the points in --out")
     sub.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def engine_once(sub) -> None:
+    """Where the work runs, for a study that writes its results at its end (no ``--resume``):
+    ``--jobs``, ``--scheduler`` or ``--dask-local``, and ``--force`` to replace them."""
+    jobs(sub)
+    where = sub.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
+    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
+    sub.add_argument("--force", action="store_true", help="replace the results in --out")

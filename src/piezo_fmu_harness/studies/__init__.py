@@ -10,7 +10,7 @@ in :data:`REGISTRY`.
 
 from __future__ import annotations
 
-from . import continuation, forced, load, nominal, optimize, sweep, two_designs
+from . import basins, bifurcation, continuation, forced, load, nominal, optimize, sweep, two_designs
 
 #: The subcommands, in the order ``piezo-fmu --help`` lists them.
 REGISTRY = (
@@ -20,6 +20,8 @@ REGISTRY = (
     load.register,
     forced.register,
     continuation.register,
+    bifurcation.register,
+    basins.register,
     optimize.register,
     sweep.register_presets,
 )

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 def register(commands) -> None:
     """``piezo-fmu continuation``."""
-    from ...options import band_options, jobs, model_options, results_folder
+    from ...options import band_options, engine_once, model_options, results_folder
     from . import study as cs
     from .tracer import Settings
 
@@ -36,10 +36,6 @@ def register(commands) -> None:
     band_options(continuation, cs.SEED_DEFAULTS)
     model_options(continuation)
     results_folder(continuation, "continuation")
-    jobs(continuation)
-    where = continuation.add_mutually_exclusive_group()
-    where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
-    where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
-    continuation.add_argument("--force", action="store_true", help="replace the results in --out")
+    engine_once(continuation)
     continuation.add_argument("--no-progress", action="store_true", help="(no progress bar is drawn)")
     continuation.set_defaults(run=cs.command)
