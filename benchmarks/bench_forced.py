@@ -18,6 +18,9 @@
 4. The default ``piezo-fmu continuation`` (seeds from 16 frequencies up and down, every orbit with
    impacts followed; target under 60 s on 2 cores): wall time, points, runs of the period map per
    point.
+5. The default ``piezo-fmu bifurcation`` (200 frequencies, up and down; target under 3 minutes) and
+   the default ``piezo-fmu basins --ratio 1.2`` (15 x 15 starts; target under 5 minutes): wall time
+   and the work a point.
 
 Wall and CPU times (the CPU time of the workers, each timing its own points). The load average
 before the run is printed: other programs on the cores slow the wall times.
@@ -135,6 +138,33 @@ def continuation(model: FmuModel, out: Path, jobs: int) -> dict:
             "seconds": summary["seconds"], "events": {k: len(v) for k, v in summary["events"].items()}}
 
 
+def timed_command(argv: list, out: Path) -> tuple[float, dict]:
+    """Run ``piezo-fmu ARGV --out OUT --force``; its wall time and ``summary.json``."""
+    begin = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        status = cli.main([*argv, "--out", str(out), "--force"])
+    wall = time.perf_counter() - begin
+    if status != 0:
+        raise SystemExit(f"{argv[0]} failed with status {status}")
+    return wall, json.loads((out / "summary.json").read_text())
+
+
+def bifurcation(model: FmuModel, out: Path, jobs: int) -> dict:
+    """The default bifurcation diagram (200 frequencies over 0.5-2 w_n, up and down)."""
+    wall, summary = timed_command(["bifurcation", "--jobs", str(jobs), "--fmu", str(model.path)], out)
+    return {"wall_s": wall, "points": summary["points"], "classes": {d: {k: c["count"] for k, c in v.items()}
+                                                                     for d, v in summary["classes"].items()}}
+
+
+def basins(model: FmuModel, out: Path, jobs: int) -> dict:
+    """The default basin map at 1.2 w_n (15 x 15 starts)."""
+    wall, summary = timed_command(["basins", "--ratio", "1.2", "--jobs", str(jobs), "--no-progress",
+                                   "--fmu", str(model.path)], out)
+    records = [json.loads(line) for line in (out / "points.jsonl").read_text().splitlines()]
+    return {"wall_s": wall, "starts": summary["starts"], "cycles_per_start": statistics.mean(r["cycles"] for r in records),
+            "shares": {a["name"]: a["share"] for a in summary["attractors"]}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes")
@@ -151,11 +181,14 @@ def main() -> None:
         decay = free_decay(model, out / "figs4-9", args.jobs)
         optimum = optimisation(model, out / "optimize", args.jobs)
         branches = continuation(model, out / "continuation", args.jobs)
+        diagram = bifurcation(model, out / "bifurcation", args.jobs)
+        basin = basins(model, out / "basins", args.jobs)
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
     report = {"jobs": args.jobs, "cores": os.cpu_count(), "load_average_before": [round(x, 2) for x in load_before],
               "frequency_response": forced, "free_decay_sweep": decay, "optimisation": optimum, "continuation": branches,
+              "bifurcation": diagram, "basins": basin,
               "free_decay_points_per_forced_point": decay["points_per_s"] / forced["points_per_s"]}
     if args.out is not None:
         (out / "bench_forced.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -187,6 +220,10 @@ def main() -> None:
           f"seeds {branches['seconds']['seeds']:.1f} s, branches {branches['seconds']['branches']:.1f} s), "
           f"{branches['branches']} branches, {branches['points']} points, {branches['evaluations']} runs of the period "
           f"map = {branches['evaluations_per_point']:.1f} a point; events {branches['events']}")
+    print(f"bifurcation         default (200 frequencies, up and down): {diagram['wall_s']:.1f} s wall (target < 180 s), "
+          f"{diagram['points']} points = {diagram['wall_s'] / diagram['points']:.2f} s a point; classes {diagram['classes']}")
+    print(f"basins              default at 1.2 w_n ({basin['starts']} starts): {basin['wall_s']:.1f} s wall (target < 300 s), "
+          f"{basin['cycles_per_start']:.0f} forcing cycles a start; shares {basin['shares']}")
     print("\n".join(frequency_results.summary_lines(forced["summary"])))
 
 
