@@ -123,3 +123,20 @@ def test_bad_optimize_input_is_refused_with_exit_status_2(tmp_path, capsys, argv
     out = tmp_path / "out"
     assert_refused(capsys, "optimize", argv, words, "--out", out, "--fmu", FMU, "--no-progress")
     assert not (out / "evaluations.jsonl").exists()
+
+
+def test_the_forced_objective_can_weigh_the_worse_of_the_up_and_down_stable_responses(tmp_path):
+    # At 1.15-1.2 w_n two stable motions coexist (tests/test_basins.py): the sweeps up and down from
+    # rest may end on different ones, and the worst term sees the larger.
+    assert run_cli("optimize", "--objective", "forced", "--param", "m=0.095:0.105", "--weight", "worst=1",
+                   "--weight", "amplitude=0", "--weight", "power=0", "--ratio-min", 1.15, "--ratio-max", 1.2,
+                   "--count", 2, "--maxiter", 1, "--popsize", 1, "--no-grid", "--sensitivity-step", 0.5,
+                   "--jobs", 2, "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
+    records = [r for r in log(tmp_path) if r.get("status") == "ok" and r.get("terms")]
+    assert records
+    for record in records:
+        measures, terms = record["measures"], record["terms"]
+        without = measures.get("amplitude_without") or read(tmp_path)["references"]["amplitude_without"]
+        assert terms["worst"] == pytest.approx(max(measures["amplitude"], measures["amplitude_down"]) / without)
+        assert record["objective"] == pytest.approx(terms["worst"])
+    assert any(r["measures"]["amplitude_down"] != r["measures"]["amplitude"] for r in records)  # two sweeps

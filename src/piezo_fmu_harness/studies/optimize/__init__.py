@@ -31,7 +31,7 @@ def register(commands) -> None:
                            help="perfectibility (free decay, default) or forced (harmonic base motion over a band)")
     optimizer.add_argument("--weight", action="append", default=[], metavar="TERM=W",
                            help="weight of a term: DI, V_rms (perfectibility; default 0.5 each) or amplitude, "
-                                "transmissibility, power (forced; default 1, 0, 0.1)")
+                                "transmissibility, power, worst (forced; default 1, 0, 0.1, 0)")
     optimizer.add_argument("--reference", action="append", default=[], metavar="TERM=VALUE",
                            help="reference value of a term, SI: DI (m/s), V_rms (V); power (W), amplitude_without (m) "
                                 "(default: the reference design's)")

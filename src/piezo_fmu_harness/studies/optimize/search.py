@@ -15,7 +15,9 @@ damper) unless given:
   with the damper): terms ``amplitude``, the peak steady-state amplitude over the band with the
   damper over the same peak without it (to be small), ``transmissibility``, the peak amplitude over
   ``Y`` (to be small), and ``power``, the mean harvested power over the band over the reference
-  design's (to be large). ``J = w_a amplitude + w_t transmissibility - w_p power``. The response
+  design's (to be large), and ``worst`` (weight 0 unless given), the larger of the peaks of a sweep
+  up and a sweep down over the peak without the damper: the worst stable response a machine may
+  show, whichever way it came. ``J = w_a amplitude + w_t transmissibility - w_p power + w_w worst``. The response
   at each frequency is the stable one: a stable orbit or, where none is found, the motion that is
   not periodic, measured over its window (its amplitude the envelope's top); an unstable orbit
   never scores.
@@ -47,7 +49,8 @@ from typing import Optional
 import numpy as np
 
 from ...fmu import FmuRunError, Instance
-from ...periodic.band import FrequencySpec, rest_state, solve_point
+from ...periodic.band import FrequencySpec
+from .band import sweep_band
 from ...store import PointStore, open_folder
 
 HEADER_FILE = "optimize.json"
@@ -55,13 +58,13 @@ EVALUATIONS_FILE = "evaluations.jsonl"
 #: Each objective's terms: +1 for a term to be large (it enters J with a minus sign), -1 small.
 TERMS = {
     "perfectibility": {"DI": 1, "V_rms": 1},
-    "forced": {"amplitude": -1, "transmissibility": -1, "power": 1},
+    "forced": {"amplitude": -1, "transmissibility": -1, "power": 1, "worst": -1},
 }
 DEFAULT_WEIGHTS = {
     "perfectibility": {"DI": 0.5, "V_rms": 0.5},
     # Lightly on power: the regimes that harvest most chatter with large amplitude (with 0.5, the
     # optimum of (m, d) was such a regime, its peak 119 mm against 16 mm for the best amplitude).
-    "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.1},
+    "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.1, "worst": 0.0},
 }
 #: The perfectibility's terms are in % (eq. 31).
 SCALE = {"perfectibility": 100.0, "forced": 1.0}
@@ -140,34 +143,16 @@ def evaluate(instance: Instance, problem: Problem, x, without: bool = False) -> 
             metrics = instance.run(values, problem.stop_time, problem.step)
             record["measures"] = {key: metrics.get(key) for key in ("DI", "DI_ls", "V_rms", "impact_count")}
         else:
-            record["measures"] = _band(instance, problem.band, values, with_damper=True)
+            record["measures"] = sweep_band(instance, problem.band, values, with_damper=True)
+            if problem.weights.get("worst"):  # the sweep down too: the worse of the two stable responses
+                record["measures"]["amplitude_down"] = sweep_band(instance, problem.band, values, True, "down")["amplitude"]
             if without or problem.without_each_time:
-                bare = _band(instance, problem.band, {**values, "d": problem.band.wide_gap}, with_damper=False)
+                bare = sweep_band(instance, problem.band, {**values, "d": problem.band.wide_gap}, with_damper=False)
                 record["measures"]["amplitude_without"] = bare["amplitude"]
     except FmuRunError as error:
         record.update(status="error", error=str(error), measures={})
     record["seconds"] = time.perf_counter() - begin
     return record
-
-
-def _band(instance: Instance, band: FrequencySpec, values: dict, with_damper: bool) -> dict:
-    """One sweep up the band, each frequency from the previous one's state."""
-    state, phase = rest_state(), 0.0
-    amplitudes, transmissibilities, powers, unsettled = [], [], [], 0
-    for omega in band.omegas:
-        point = solve_point(instance, 0, values, float(omega), band.base_amplitude(float(omega)), band.settings,
-                            state, phase)
-        if point["status"] != "ok":
-            raise FmuRunError(point["error"])
-        state, phase = point["state"], point["phase"]
-        amplitudes.append(point["amplitude"])
-        transmissibilities.append(point["transmissibility"])
-        powers.append(point["harvested_power"])
-        unsettled += not point["settled"]
-        if not with_damper and point["impacts_per_cycle"] > 0:
-            raise FmuRunError(f"the run without the damper (d = {values['d']:g} m) made impacts")
-    return {"amplitude": max(amplitudes), "transmissibility": max(transmissibilities),
-            "power": float(np.mean(powers)), "unsettled": unsettled}
 
 
 # -- the objective ---------------------------------------------------------------------------------
@@ -179,7 +164,9 @@ def terms(problem: Problem, measures: dict, references: dict) -> dict:
     without = measures.get("amplitude_without", references.get("amplitude_without"))
     return {"amplitude": measures["amplitude"] / without if without else math.nan,
             "transmissibility": measures["transmissibility"],
-            "power": measures["power"] / references["power"] if references.get("power") else math.nan}
+            "power": measures["power"] / references["power"] if references.get("power") else math.nan,
+            "worst": (max(measures["amplitude"], measures["amplitude_down"]) / without
+                      if without and measures.get("amplitude_down") is not None else math.nan)}
 
 
 def objective_value(problem: Problem, parts: dict) -> float:
