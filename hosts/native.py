@@ -59,7 +59,24 @@ def build(dest: Optional[Path] = None) -> Path:
     if dest.is_file() and dest.stat().st_mtime >= SOURCE.stat().st_mtime:
         return dest
     command = [compiler(), "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", "-I", str(fmi_headers()),
-               str(SOURCE), "-o", str(dest), "-ldl", "-lm"]
+               str(SOURCE), "-o", str(dest), "-ldl", "-lm", "-lpthread"]
+    subprocess.run(command, check=True, capture_output=True, text=True)
+    return dest
+
+
+def build_windows(dest: Optional[Path] = None) -> Path:
+    """The host for Windows, cross-compiled with mingw-w64 (static: it needs no DLL of mingw's;
+    mingw's own printf and strtod, correctly rounded as glibc's are)."""
+    dest = Path(dest) if dest is not None else BUILD_DIR / "native_host.exe"
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    if dest.is_file() and dest.stat().st_mtime >= SOURCE.stat().st_mtime:
+        return dest
+    mingw = shutil.which("x86_64-w64-mingw32-gcc")
+    if not mingw:
+        raise FileNotFoundError("no x86_64-w64-mingw32-gcc: `make system-deps` installs it "
+                                "(Debian: apt-get install gcc-mingw-w64-x86-64)")
+    command = [mingw, "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", "-D__USE_MINGW_ANSI_STDIO=1",
+               "-I", str(fmi_headers()), str(SOURCE), "-o", str(dest), "-static"]
     subprocess.run(command, check=True, capture_output=True, text=True)
     return dest
 
