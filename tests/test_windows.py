@@ -17,6 +17,9 @@ environment with an empty ``WINEPATH``.
 4. Every refusal returns Error in both FMI versions (``native_host --refusals``), and after
    ``Reset`` the same instance runs the nominal case to the same bits as a fresh one.
 5. Two instances in two threads give the same bits as one alone.
+6. fmpy installs into that CPython (its wheel carries Windows binaries; with ``attrs`` and
+   ``lxml``): there, in a Python host, the loader finds the interpreter already in the process
+   and both FMUs, in one process, agree with fmpy on Linux in both cases.
 """
 
 from __future__ import annotations
@@ -57,6 +60,11 @@ def python(wine) -> Path:
 @pytest.fixture(scope="session")
 def python_without_numpy(wine) -> Path:
     return windows.embeddable_python(())
+
+
+@pytest.fixture(scope="session")
+def python_with_fmpy(wine) -> Path:
+    return windows.embeddable_python((windows.NUMPY, *windows.FMPY))
 
 
 @pytest.fixture(scope="session")
@@ -243,3 +251,33 @@ def test_two_instances_in_two_threads_give_the_bits_of_one_alone(host, fmu_dirs,
     assert completed.stderr == ""
     for k in (1, 2):
         assert Path(f"{out}.{k}").read_bytes() == nominal_runs[version].read_bytes()
+
+
+# -- a Python host on Windows ------------------------------------------------------------------------
+
+IN_FMPY = """
+import sys
+from pathlib import Path
+sys.modules["_wmi"] = None  # Python 3.13's platform module asks WMI through propsys, which Wine 8 lacks
+repo, out = sys.argv[1], Path(sys.argv[2])
+sys.path.insert(0, repo)
+from crosscheck import importers, scenario
+for version, fmu in ((2, "PiezoImpactDamper.fmu"), (3, "PiezoImpactDamper3.fmu")):
+    fmu = Path(repo) / "fmus" / fmu
+    nominal = importers.run_fmpy(fmu, times=scenario.grid(0.0, %r, %r), inputs={}, start_values={})
+    scenario.write_csv(out / f"nominal{version}.csv", nominal.time, nominal.outputs)
+    harmonic = importers.run_fmpy(fmu)
+    scenario.write_csv(out / f"harmonic{version}.csv", harmonic.time, harmonic.outputs)
+""" % (NOMINAL_STOP, STEP)
+
+
+def test_in_fmpy_on_windows_both_fmus_use_the_python_of_the_process_and_agree_with_fmpy_on_linux(
+        python_with_fmpy, tmp_path):
+    script = tmp_path / "in_fmpy.py"
+    script.write_text(IN_FMPY)
+    completed = windows.run([str(windows.WINE), str(python_with_fmpy / "python.exe"), windows.windows_path(script),
+                             windows.windows_path(REPO), windows.windows_path(tmp_path)], timeout=600)
+    assert completed.returncode == 0, completed.stderr
+    for version in FMUS:
+        assert_agrees_with_linux(tmp_path / f"nominal{version}.csv", "nominal")
+        assert_agrees_with_linux(tmp_path / f"harmonic{version}.csv", "harmonic")
