@@ -10,10 +10,13 @@ environment with an empty ``WINEPATH``.
    call OK, and agree with fmpy on Linux at the same communication points: ``voltage_rms`` and
    ``damping_inclination`` to 1e-8 relative, the displacements to 1e-9 m (numpy 2.1.3 and the
    UCRT against numpy and glibc differ in the last bits, which the nominal case amplifies).
-2. Each route to Python works on its own: ``PIEZO_FMU_PYTHON``, ``python.exe`` on ``PATH``
-   (``WINEPATH``), and the PEP 514 registry entry (written with ``wine reg add``).
-3. A missing interpreter, or one without numpy: instantiation returns NULL after a message that
-   says what was tried and what to set, and the host exits cleanly.
+2. Each route to Python works on its own: ``PIEZO_FMU_PYTHON``, the ``py`` launcher (a stand-in,
+   ``tests/windows_stand_ins.c``: the real one comes only with Python's installer),
+   ``python.exe`` on ``PATH`` (``WINEPATH``), and the PEP 514 registry entry (written with
+   ``wine reg add``).
+3. A missing interpreter, one without numpy, or one that never answers: instantiation returns
+   NULL after a message that says what was tried and what to set, and the host exits cleanly
+   (at the deadline, for the one that never answers).
 4. Every refusal returns Error in both FMI versions (``native_host --refusals``), and after
    ``Reset`` the same instance runs the nominal case to the same bits as a fresh one.
 5. Two instances in two threads give the same bits as one alone.
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 import zipfile
 from functools import lru_cache
 from pathlib import Path
@@ -165,6 +169,22 @@ def test_python_on_path_alone_is_found(host, fmu_dirs, python, tmp_path, version
     assert_ran(short_run(host, fmu_dirs[version], tmp_path, {"WINEPATH": windows.windows_path(python)}), tmp_path)
 
 
+def stand_in(dest: Path, *defines: str) -> Path:
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run(["x86_64-w64-mingw32-gcc", "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", *defines,
+                    str(REPO / "tests" / "windows_stand_ins.c"), "-o", str(dest), "-static"], check=True,
+                   capture_output=True, text=True)
+    return dest
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_py_launcher_alone_is_found(host, fmu_dirs, python, tmp_path, version):
+    target = windows.windows_path(python / "python.exe").replace("\\", "\\\\")
+    launcher = stand_in(tmp_path / "launcher" / "py.exe", f'-DPYTHON="{target}"')
+    completed = short_run(host, fmu_dirs[version], tmp_path, {"WINEPATH": windows.windows_path(launcher.parent)})
+    assert_ran(completed, tmp_path)
+
+
 @pytest.mark.parametrize("version", [2, 3])
 def test_python_in_the_registry_alone_is_found(host, fmu_dirs, python, tmp_path, version):
     reg = [str(windows.WINE), "reg"]
@@ -178,19 +198,29 @@ def test_python_in_the_registry_alone_is_found(host, fmu_dirs, python, tmp_path,
     assert_ran(completed, tmp_path)
 
 
+@pytest.fixture(scope="session")
+def hanging_python(tmp_path_factory) -> Path:
+    return stand_in(tmp_path_factory.mktemp("hang") / "python.exe", "-DHANG")
+
+
 @pytest.mark.parametrize("version", [2, 3])
-@pytest.mark.parametrize("case", ["missing", "without numpy", "none anywhere"])
+@pytest.mark.parametrize("case", ["missing", "without numpy", "never answers", "none anywhere"])
 def test_without_a_usable_python_instantiation_fails_with_what_was_tried_and_what_to_set(
-        host, fmu_dirs, python_without_numpy, tmp_path, version, case):
+        host, fmu_dirs, python_without_numpy, hanging_python, tmp_path, version, case):
     missing = r"Z:\nonexistent\python.exe"
+    hanging = windows.windows_path(hanging_python)
     extra, said = {
+        "never answers": ({"PIEZO_FMU_PYTHON": hanging, "PIEZO_FMU_PYTHON_TIMEOUT": "2"},
+                          f"tried PIEZO_FMU_PYTHON={hanging}: it did not answer within 2 s"),
         "missing": ({"PIEZO_FMU_PYTHON": missing}, f"tried PIEZO_FMU_PYTHON={missing}: cannot run it (error "),
         "without numpy": (chosen(python_without_numpy),
                           f"tried PIEZO_FMU_PYTHON={chosen(python_without_numpy)['PIEZO_FMU_PYTHON']}: it cannot import "
                           "numpy (ModuleNotFoundError(\"No module named 'numpy'\"))"),
         "none anywhere": ({}, "PIEZO_FMU_PYTHON is unset; there is no py launcher; there is no python.exe on PATH="),
     }[case]
+    started = time.perf_counter()
     completed = short_run(host, fmu_dirs[version], tmp_path, extra)
+    assert time.perf_counter() - started < 30
     assert completed.returncode == 1  # an exit, not a crash
     assert completed.stdout == ""
     message, failure = completed.stderr.splitlines()
