@@ -142,7 +142,7 @@ def test_both_fmus_bundle_the_same_package_which_a_host_process_imports_once():
 
 
 @pytest.mark.parametrize("target", TARGETS, ids=IDS)
-def test_the_declared_bounds_allow_exactly_the_values_a_setter_accepts(target):
+def test_the_declared_bounds_allow_exactly_the_values_the_fmu_accepts(target):
     """FMI has no exclusive bounds: an open end is declared as the nearest double inside it (``m``
     in (0, inf) kg declares min="5e-324"), so a host that trusts min/max foresees every refusal of
     a single value: the declared end is accepted and the next double outside it is refused."""
