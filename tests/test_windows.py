@@ -19,7 +19,9 @@ environment with an empty ``WINEPATH``.
    (at the deadline, for the one that never answers).
 4. Every refusal returns Error in both FMI versions (``native_host --refusals``), and after
    ``Reset`` the same instance runs the nominal case to the same bits as a fresh one.
-5. Two instances in two threads give the same bits as one alone.
+5. Two instances in two threads give the same bits as one alone, and an FMI 2.0 and an FMI 3.0
+   FMU in one native process share one interpreter (the second loader finds the first one's
+   ``python313.dll`` in the process).
 6. fmpy installs into that CPython (its wheel carries Windows binaries; with ``attrs`` and
    ``lxml``): there, in a Python host, the loader finds the interpreter already in the process
    and both FMUs, in one process, agree with fmpy on Linux in both cases.
@@ -311,3 +313,25 @@ def test_in_fmpy_on_windows_both_fmus_use_the_python_of_the_process_and_agree_wi
     for version in FMUS:
         assert_agrees_with_linux(tmp_path / f"nominal{version}.csv", "nominal")
         assert_agrees_with_linux(tmp_path / f"harmonic{version}.csv", "harmonic")
+
+
+def test_fmi2_and_fmi3_fmus_in_one_windows_process_share_one_interpreter(python, tmp_path):
+    from fmpy import read_model_description
+
+    from tests.test_loader import IDENTIFIER, build_tiny
+
+    program = tmp_path / "two_fmus.exe"
+    subprocess.run(["x86_64-w64-mingw32-gcc", "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", "-I",
+                    str(native.fmi_headers()), str(REPO / "tests" / "two_fmus.c"), "-o", str(program), "-static"],
+                   check=True, capture_output=True, text=True)
+    args = []
+    for version in (2, 3):
+        fmu = build_tiny(version, tmp_path / f"build{version}")
+        md = read_model_description(str(fmu))
+        vr = next(v.valueReference for v in md.modelVariables if v.name == "instances")
+        with zipfile.ZipFile(fmu) as archive:
+            archive.extractall(tmp_path / f"fmi{version}")
+        args += [windows.windows_path(tmp_path / f"fmi{version}"), IDENTIFIER[version], md.guid, str(vr)]
+    completed = windows.run([str(windows.WINE), str(program), *args], extra=chosen(python), timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.split() == ["1", "2"]  # the FMI 3.0 slave is the interpreter's second
