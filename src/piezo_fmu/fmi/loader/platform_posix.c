@@ -147,7 +147,7 @@ int platform_run(const Route *route, const char *code, double timeout, char **ou
     char *argv[5];
     int argc = 0;
     argv[argc++] = (char *)python;
-    for (int i = 0; route->arguments[i] && i < 2; i++) argv[argc++] = (char *)route->arguments[i];
+    for (int i = 0; i < 2 && route->arguments[i]; i++) argv[argc++] = (char *)route->arguments[i];
     argv[argc++] = "-c";
     argv[argc++] = (char *)code;
     argv[argc] = NULL;
