@@ -8,6 +8,9 @@ is to find (``python3`` in the folder of the given interpreter, a virtual enviro
 FMU archive is extracted to a scratch folder for the run. ``hosts/run_native_host.sh`` remains
 for those who prefer to put libpython into a host themselves.
 
+:func:`build_windows` cross-compiles the same host for Windows with mingw-w64; the Windows tests
+(``tests/test_windows.py``, ``tests/windows.py``) run it under Wine.
+
 It imports nothing of ``piezo_fmu``: a process that has run an FMU may hold the FMU's bundled copy
 of the package under that name.
 """
