@@ -13,7 +13,9 @@ environment with an empty ``WINEPATH``.
 2. Each route to Python works on its own: ``PIEZO_FMU_PYTHON``, the ``py`` launcher (a stand-in,
    ``tests/windows_stand_ins.c``: the real one comes only with Python's installer),
    ``python.exe`` on ``PATH`` (``WINEPATH``), and the PEP 514 registry entry (written with
-   ``wine reg add``).
+   ``wine reg add``). A virtual environment's packages reach the embedded interpreter through
+   the ``PYTHONPATH`` the loader sets (without it, numpy is not found: checked by hand with a
+   loader built without that line).
 3. A missing interpreter, one without numpy, or one that never answers: instantiation returns
    NULL after a message that says what was tried and what to set, and the host exits cleanly
    (at the deadline, for the one that never answers).
@@ -197,6 +199,19 @@ def test_python_in_the_registry_alone_is_found(host, fmu_dirs, python, tmp_path,
     finally:
         removed = windows.run([*reg, "delete", REGISTRY_KEY.rsplit("\\", 2)[0], "/f"])
         assert removed.returncode == 0, removed.stderr
+    assert_ran(completed, tmp_path)
+
+
+def test_a_virtual_environments_packages_reach_the_embedded_interpreter_through_pythonpath(
+        host, fmu_dirs, wine, tmp_path):
+    """Its numpy is in the environment's site-packages alone, which the interpreter embedded in the
+    host finds only through the PYTHONPATH the loader sets (in the process's environment and in the
+    C runtime's copy of it, which the interpreter reads)."""
+    python = windows.virtual_environment()
+    answer = windows.run([str(windows.WINE), str(python), "-c", "import sys, numpy; print(sys.prefix)"])
+    assert answer.returncode == 0, answer.stderr
+    assert answer.stdout.strip() == windows.windows_path(python.parent.parent)  # a virtual environment
+    completed = short_run(host, fmu_dirs[2], tmp_path, {"PIEZO_FMU_PYTHON": windows.windows_path(python)})
     assert_ran(completed, tmp_path)
 
 

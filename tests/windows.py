@@ -91,6 +91,28 @@ def embeddable_python(packages: Sequence[str] = (NUMPY,)) -> Path:
     return dest / "python"
 
 
+def virtual_environment() -> Path:
+    """The ``Scripts\\python.exe`` of a virtual environment's layout: the embeddable CPython
+    without its ``._pth`` file (which would fix ``sys.path``) in ``Scripts``, ``pyvenv.cfg`` above
+    it, and numpy only in the environment's ``Lib\\site-packages``. The embeddable CPython has no
+    ``venv`` module, so the layout is made here. An interpreter embedded in another program reads
+    no ``pyvenv.cfg``: it finds numpy only through ``PYTHONPATH``, which the loader sets. Cached."""
+    dest = CACHE / f"venv-cpython-{CPYTHON_VERSION}-{NUMPY.replace('==', '-')}"
+    if (dest / "Scripts" / "python.exe").is_file():
+        return dest / "Scripts" / "python.exe"
+    scratch = dest.with_name(dest.name + ".partial")
+    shutil.rmtree(scratch, ignore_errors=True)
+    shutil.copytree(embeddable_python(()), scratch / "Scripts")
+    (scratch / "Scripts" / "python313._pth").unlink()
+    (scratch / "pyvenv.cfg").write_text(f"home = {windows_path(dest / 'Scripts')}\ninclude-system-site-packages = false\n"
+                                        f"version = {CPYTHON_VERSION}\n")
+    with zipfile.ZipFile(_pip_download(CACHE / "downloads", NUMPY, binary_for_windows=True)) as wheel:
+        wheel.extractall(scratch / "Lib" / "site-packages")
+    shutil.rmtree(dest, ignore_errors=True)
+    scratch.rename(dest)
+    return dest / "Scripts" / "python.exe"
+
+
 def wine_prefix() -> Path:
     """A Wine prefix of the tests' own, made once (its first start takes seconds)."""
     prefix = CACHE / "wineprefix"
