@@ -11,12 +11,15 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
-# Debian packages: libtbb12 (ecospy) and a C compiler (the native host). Installed when
-# missing and we are root; otherwise the command to run is printed.
+# Debian packages: libtbb12 (ecospy), a C compiler (the native host), mingw-w64 (the FMUs'
+# Windows binaries, `make fmu`) and Wine (the Windows tests). Installed when missing and we are
+# root; otherwise the command to run is printed.
 system-deps:
 	@missing=""; \
 	ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
 	command -v cc >/dev/null 2>&1 || missing="$$missing gcc libc6-dev"; \
+	command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1 || missing="$$missing gcc-mingw-w64-x86-64"; \
+	test -x /usr/lib/wine/wine64 || missing="$$missing wine64"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
@@ -58,7 +61,7 @@ dist: $(STAMP)
 
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
 # The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
-fmu: $(STAMP)
+fmu: system-deps $(STAMP)
 	$(BIN)/python -m piezo_fmu.build
 	$(BIN)/python crosscheck/run_crosscheck.py --write
 
@@ -68,7 +71,7 @@ crosscheck: system-deps $(STAMP)
 hosts: system-deps $(STAMP)
 	$(BIN)/python hosts/coupled.py
 
-fmu-check: $(STAMP)
+fmu-check: system-deps $(STAMP)
 	$(BIN)/python -m piezo_fmu.build --check
 
 bench: bench-core bench-fmu bench-sweep bench-me bench-forced

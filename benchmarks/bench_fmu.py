@@ -12,11 +12,13 @@ does no work. So the ratio is what the core and its readings add on top of FMI, 
 binary and fmpy. The piezo FMUs are the committed ``fmus/*.fmu``. The timing process never imports
 ``piezo_fmu``: each FMU runs the core bundled in it, as a host would.
 
-All these FMUs have the project's loader as their linux binary. Each floor is also timed with
-pythonfmu's own binary in the loader's place (the same archive otherwise): the ratio of the two
-is what the loader costs a step (target: no measurable cost).
+All these FMUs have the project's loader as their linux and Windows binaries. Each floor is also
+timed with pythonfmu's own binary in the loader's place (the same archive otherwise): the ratio
+of the two is what the loader costs a step (target: no measurable cost). The Windows row does
+the same under Wine, in fmpy inside the tests' embeddable CPython 3.13.2 (``tests/windows.py``):
+only that ratio is reported, as Wine's absolute times say nothing of Windows'.
 
-    python benchmarks/bench_fmu.py [--repeat N] [--fmi 2 --fmi 3]
+    python benchmarks/bench_fmu.py [--repeat N] [--fmi 2 --fmi 3] [--no-windows]
 """
 
 from __future__ import annotations
@@ -57,14 +59,15 @@ def write_floors(version: int, with_loader: Path, without_loader: Path) -> None:
     """The no-work FMU, and the same with pythonfmu's binary where the loader is (child process only)."""
     from piezo_fmu.build.archive import deterministic_zip
     from piezo_fmu.build.fmus import TARGETS, build_bytes
-    from piezo_fmu.build.loader import REAL_SUFFIX
+    from piezo_fmu.build.loader import LIBRARY_SUFFIX, REAL_SUFFIXES
 
     data = build_bytes(TARGETS[version], FLOOR_SLAVES[version], (HERE / "no_core.py",))
     with_loader.write_bytes(data)
     with zipfile.ZipFile(io.BytesIO(data)) as archive:
         files = {name: archive.read(name) for name in archive.namelist()}
-    for name in [name for name in files if name.endswith(REAL_SUFFIX)]:
-        files[name[:-len(REAL_SUFFIX)] + ".so"] = files.pop(name)
+    for platform, real_suffix in REAL_SUFFIXES.items():
+        for name in [name for name in files if name.endswith(real_suffix)]:
+            files[name[:-len(real_suffix)] + LIBRARY_SUFFIX[platform]] = files.pop(name)
     without_loader.write_bytes(deterministic_zip(files))
 
 
@@ -111,12 +114,52 @@ def measure(version: int, repeat: int, floor_fmu: Path, bare_floor_fmu: Path) ->
     }
 
 
+#: Run by the Windows CPython under Wine: the best CPU time of each floor, as JSON.
+WINDOWS_TIMING = """
+import json, sys
+sys.modules["_wmi"] = None  # Python 3.13's platform module asks WMI through propsys, which Wine 8 lacks
+here, repeat, fmus = sys.argv[1], int(sys.argv[2]), dict(zip(("floor", "floor_without_loader"), sys.argv[3:5]))
+sys.path.insert(0, here)
+import bench_fmu
+unzipped = {key: bench_fmu.extract(path) for key, path in fmus.items()}
+described = {key: bench_fmu.read_model_description(path) for key, path in fmus.items()}
+times = {key: [] for key in fmus}
+for key in fmus:
+    bench_fmu.time_run(unzipped[key], described[key])
+for _ in range(repeat):
+    for key in fmus:
+        times[key].append(bench_fmu.time_run(unzipped[key], described[key])[0])
+print(json.dumps({key: min(values) for key, values in times.items()}))
+"""
+
+
+def measure_windows(version: int, repeat: int, floor_fmu: Path, bare_floor_fmu: Path) -> dict:
+    """The loader's cost on Windows, under Wine: the floor with the loader against the floor with
+    pythonfmu's DLL in its place, in fmpy inside the embeddable CPython of the tests."""
+    sys.path.insert(0, str(HERE.parent))
+    from tests import windows
+
+    windows.wine_prefix()
+    python = windows.embeddable_python((windows.NUMPY, *windows.FMPY))
+    completed = windows.run([str(windows.WINE), str(python / "python.exe"), "-c", WINDOWS_TIMING,
+                             windows.windows_path(HERE), str(repeat), windows.windows_path(floor_fmu),
+                             windows.windows_path(bare_floor_fmu)], timeout=1800)
+    if completed.returncode != 0:
+        raise SystemExit(f"the Windows timing failed under Wine:\n{completed.stderr[-3000:]}")
+    cpu = json.loads(completed.stdout.strip().splitlines()[-1])
+    return {"fmi_version": version, "platform": f"Windows under Wine, CPython {windows.CPYTHON_VERSION} embeddable",
+            "case": f"the floor FMU, 0 to {STOP_TIME} s, communication step {STEP} s, fmpy simulate_fmu",
+            "runs_each": repeat, "statistic": "best run",
+            "loader_ratio": cpu["floor"] / cpu["floor_without_loader"]}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=5, help="runs of each FMU (the best counts)")
     parser.add_argument("--fmi", type=int, choices=(2, 3), action="append", help="FMI version (default: both)")
+    parser.add_argument("--no-windows", action="store_true", help="leave out the Windows row (Wine)")
     args = parser.parse_args()
-    results = []
+    results, windows_results = [], []
     versions = args.fmi or (2, 3)
     with tempfile.TemporaryDirectory(prefix="bench_fmu_") as scratch:
         floors = {version: (Path(scratch) / f"floor{version}.fmu", Path(scratch) / f"floor{version}_without_loader.fmu")
@@ -125,11 +168,15 @@ def main() -> None:
             build_floors(version, floor, bare_floor)
         for version in versions:
             results.append(measure(version, args.repeat, *floors[version]))
-    print(json.dumps(results, indent=2))
+        for version in () if args.no_windows else versions:
+            windows_results.append(measure_windows(version, args.repeat, *floors[version]))
+    print(json.dumps(results + windows_results, indent=2))
     for r in results:
         print(f"FMI {r['fmi_version']}: piezo {r['piezo_us_per_step']:.1f} us/step, floor {r['floor_us_per_step']:.1f} "
               f"us/step, ratio {r['ratio']:.2f} (target <= {TARGET_RATIO:g}); floor with / without the loader "
               f"{r['loader_ratio']:.3f}")
+    for r in windows_results:
+        print(f"FMI {r['fmi_version']}, Windows under Wine: floor with / without the loader {r['loader_ratio']:.3f}")
 
 
 if __name__ == "__main__":

@@ -3,12 +3,13 @@
  *
  * It loads an extracted FMU's binary with dlopen (binaries/linux64/<modelIdentifier>.so for FMI
  * 2.0, binaries/x86_64-linux/<modelIdentifier>.so for FMI 3.0; the version is the
- * modelDescription's fmiVersion), runs it over a fixed communication grid through the FMI C API
+ * modelDescription's fmiVersion), or, built for Windows with mingw-w64, with LoadLibraryExA
+ * (binaries/win64/<id>.dll, binaries/x86_64-windows/<id>.dll), runs it over a fixed communication grid through the FMI C API
  * and writes every output to a CSV file in the FMI cross-check format ("time" first, quoted
  * names, %.17g so that every double is written exactly).
  *
  *   native_host FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV]
- *                               [--set NAME=VALUE]...
+ *                               [--set NAME=VALUE]... [--refusals] [--threads N]
  *
  * FMU_DIR  the FMU archive extracted (modelDescription.xml, binaries/, resources/).
  * --stop   stop time in s (default: DefaultExperiment stopTime, else 1).
@@ -18,6 +19,11 @@
  *          rows are linearly interpolated (FMI cross-check rules); a row at the exact grid time
  *          is used as it is.
  * --set    a start value for a parameter or input, by name (Real/Float64 or Integer/Int32).
+ * --refusals  before the run, make every call the project's FMU must refuse (check_refusals)
+ *          and require Error from each, then fmi2Reset / fmi3Reset: the run is then that of the
+ *          same instance after its reset.
+ * --threads N  N instances, each in a thread of its own, each running the whole case and
+ *          writing OUT_CSV.1 ... OUT_CSV.N.
  *
  * The communication grid is the one of OSP libcosim, which counts time in integer nanoseconds:
  * t_k = start + (k * step_ns) / 1e9 (the double nearest to k * step), and the step passed to
@@ -33,7 +39,6 @@
 
 #define _XOPEN_SOURCE 700
 
-#include <dlfcn.h>
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
@@ -41,14 +46,99 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "fmi2FunctionTypes.h"
 #include "fmi3FunctionTypes.h"
 
+/* What differs on Windows (cross-compiled with mingw-w64): loading the binary, paths, threads. */
+#ifdef _WIN32
+#include <process.h>
+#include <windows.h>
+#define PLATFORM2 "win64"
+#define PLATFORM3 "x86_64-windows"
+#define LIBRARY_SUFFIX ".dll"
+#define strtok_r strtok_s
+typedef HANDLE Thread;
+static void *open_library(const char *path)
+{
+    return (void *)LoadLibraryExA(path, NULL, LOAD_WITH_ALTERED_SEARCH_PATH);
+}
+static const char *library_error(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "LoadLibraryExA error %lu", (unsigned long)GetLastError());
+    return text;
+}
+static void *library_symbol(void *library, const char *name)
+{
+    return (void *)GetProcAddress((HMODULE)library, name);
+}
+static int absolute_path(const char *path, char *out, size_t size)
+{
+    return _fullpath(out, path, size) != NULL;
+}
+static int start_thread(Thread *thread, void (*function)(void *), void *argument)
+{
+    *thread = (HANDLE)_beginthread(function, 0, argument);
+    return *thread != (HANDLE)(intptr_t)-1L;
+}
+static void join_thread(Thread thread)
+{
+    WaitForSingleObject(thread, INFINITE);
+}
+#else
+#include <dlfcn.h>
+#include <pthread.h>
+#include <unistd.h>
+#define PLATFORM2 "linux64"
+#define PLATFORM3 "x86_64-linux"
+#define LIBRARY_SUFFIX ".so"
+typedef pthread_t Thread;
+static void *open_library(const char *path)
+{
+    return dlopen(path, RTLD_NOW | RTLD_LOCAL);
+}
+static const char *library_error(void)
+{
+    return dlerror();
+}
+static void *library_symbol(void *library, const char *name)
+{
+    return dlsym(library, name);
+}
+static int absolute_path(const char *path, char *out, size_t size)
+{
+    char resolved[PATH_MAX];
+    return realpath(path, resolved) && (size_t)snprintf(out, size, "%s", resolved) < size;
+}
+typedef struct {
+    void (*function)(void *);
+    void *argument;
+} ThreadStart;
+static void *thread_main(void *start)
+{
+    ThreadStart *s = start;
+    s->function(s->argument);
+    free(s);
+    return NULL;
+}
+static int start_thread(Thread *thread, void (*function)(void *), void *argument)
+{
+    ThreadStart *s = malloc(sizeof *s);
+    if (!s) return 0;
+    *s = (ThreadStart){function, argument};
+    return pthread_create(thread, NULL, thread_main, s) == 0;
+}
+static void join_thread(Thread thread)
+{
+    pthread_join(thread, NULL);
+}
+#endif
+
 #define MAX_VARS 512
 #define MAX_SETS 64
 #define MAX_INPUT_COLS 64
+#define MAX_THREADS 8
 
 typedef struct {
     char name[128];
@@ -327,7 +417,7 @@ static void logger3(fmi3InstanceEnvironment env, fmi3Status status, fmi3String c
 
 static void *symbol(void *lib, const char *name)
 {
-    void *s = dlsym(lib, name);
+    void *s = library_symbol(lib, name);
     if (!s) die("the FMU binary has no %s", name);
     return s;
 }
@@ -351,6 +441,7 @@ typedef struct {
     fmi2ExitInitializationModeTYPE *exit_init2;
     fmi2DoStepTYPE *do_step2;
     fmi2TerminateTYPE *terminate2;
+    fmi2ResetTYPE *reset2;
     fmi2FreeInstanceTYPE *free2;
     fmi3SetFloat64TYPE *set_real3;
     fmi3SetInt32TYPE *set_integer3;
@@ -360,6 +451,7 @@ typedef struct {
     fmi3ExitInitializationModeTYPE *exit_init3;
     fmi3DoStepTYPE *do_step3;
     fmi3TerminateTYPE *terminate3;
+    fmi3ResetTYPE *reset3;
     fmi3FreeInstanceTYPE *free3;
 } Fmu;
 
@@ -379,10 +471,14 @@ static void instantiate(Fmu *fmu, void *lib, const ModelDescription *md, const c
         fmu->exit_init2 = (fmi2ExitInitializationModeTYPE *)symbol(lib, "fmi2ExitInitializationMode");
         fmu->do_step2 = (fmi2DoStepTYPE *)symbol(lib, "fmi2DoStep");
         fmu->terminate2 = (fmi2TerminateTYPE *)symbol(lib, "fmi2Terminate");
+        fmu->reset2 = (fmi2ResetTYPE *)symbol(lib, "fmi2Reset");
         fmu->free2 = (fmi2FreeInstanceTYPE *)symbol(lib, "fmi2FreeInstance");
         fmi2InstantiateTYPE *instantiate2 = (fmi2InstantiateTYPE *)symbol(lib, "fmi2Instantiate");
         static fmi2CallbackFunctions callbacks = {logger2, calloc, free, NULL, NULL};
-        snprintf(resources, sizeof resources, "file://%s/resources", abs_dir);
+        /* a file URI: file:///C:/... on Windows, file:///home/... elsewhere */
+        snprintf(resources, sizeof resources, "file://%s%s/resources", abs_dir[0] == '/' ? "" : "/", abs_dir);
+        for (char *p = resources; *p; p++)
+            if (*p == '\\') *p = '/';
         fmu->c = instantiate2("native_host", fmi2CoSimulation, md->guid, resources, &callbacks, fmi2False, fmi2True);
     } else {
         fmi3GetVersionTYPE *get_version = (fmi3GetVersionTYPE *)symbol(lib, "fmi3GetVersion");
@@ -395,65 +491,100 @@ static void instantiate(Fmu *fmu, void *lib, const ModelDescription *md, const c
         fmu->exit_init3 = (fmi3ExitInitializationModeTYPE *)symbol(lib, "fmi3ExitInitializationMode");
         fmu->do_step3 = (fmi3DoStepTYPE *)symbol(lib, "fmi3DoStep");
         fmu->terminate3 = (fmi3TerminateTYPE *)symbol(lib, "fmi3Terminate");
+        fmu->reset3 = (fmi3ResetTYPE *)symbol(lib, "fmi3Reset");
         fmu->free3 = (fmi3FreeInstanceTYPE *)symbol(lib, "fmi3FreeInstance");
         fmi3InstantiateCoSimulationTYPE *instantiate3 =
             (fmi3InstantiateCoSimulationTYPE *)symbol(lib, "fmi3InstantiateCoSimulation");
-        snprintf(resources, sizeof resources, "%s/resources/", abs_dir);
+        snprintf(resources, sizeof resources, "%s%cresources%c", abs_dir, abs_dir[0] == '/' ? '/' : '\\',
+                 abs_dir[0] == '/' ? '/' : '\\');
         fmu->c = instantiate3("native_host", md->guid, resources, fmi3False, fmi3True, fmi3False, fmi3False, NULL, 0,
                               NULL, logger3, NULL);
     }
     if (!fmu->c) die("fmi%dInstantiate%s failed", fmu->version, fmu->version == 3 ? "CoSimulation" : "");
 }
 
-static void set_real(const Fmu *fmu, unsigned int vr, double value, const char *what)
+static int set_real_status(const Fmu *fmu, unsigned int vr, double value)
 {
     if (fmu->version == 2) {
         fmi2ValueReference r = vr;
-        check(fmu->set_real2(fmu->c, &r, 1, &value), what);
-    } else {
-        fmi3ValueReference r = vr;
-        check(fmu->set_real3(fmu->c, &r, 1, &value, 1), what);
+        return fmu->set_real2(fmu->c, &r, 1, &value);
     }
+    fmi3ValueReference r = vr;
+    return fmu->set_real3(fmu->c, &r, 1, &value, 1);
 }
 
-static void set_integer(const Fmu *fmu, unsigned int vr, int value, const char *what)
+static int set_integer_status(const Fmu *fmu, unsigned int vr, int value)
 {
     if (fmu->version == 2) {
         fmi2ValueReference r = vr;
         fmi2Integer v = value;
-        check(fmu->set_integer2(fmu->c, &r, 1, &v), what);
+        return fmu->set_integer2(fmu->c, &r, 1, &v);
+    }
+    fmi3ValueReference r = vr;
+    fmi3Int32 v = value;
+    return fmu->set_integer3(fmu->c, &r, 1, &v, 1);
+}
+
+static int get_real_status(const Fmu *fmu, unsigned int vr, double *value)
+{
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        return fmu->get_real2(fmu->c, &r, 1, value);
+    }
+    fmi3ValueReference r = vr;
+    return fmu->get_real3(fmu->c, &r, 1, value, 1);
+}
+
+static int get_integer_status(const Fmu *fmu, unsigned int vr, int *value)
+{
+    int status;
+    if (fmu->version == 2) {
+        fmi2ValueReference r = vr;
+        fmi2Integer v = 0;
+        status = fmu->get_integer2(fmu->c, &r, 1, &v);
+        *value = (int)v;
     } else {
         fmi3ValueReference r = vr;
-        fmi3Int32 v = value;
-        check(fmu->set_integer3(fmu->c, &r, 1, &v, 1), what);
+        fmi3Int32 v = 0;
+        status = fmu->get_integer3(fmu->c, &r, 1, &v, 1);
+        *value = (int)v;
     }
+    return status;
+}
+
+static int do_step_status(const Fmu *fmu, double t, double h, int *terminate)
+{
+    *terminate = 0;
+    if (fmu->version == 2) return fmu->do_step2(fmu->c, t, h, fmi2True);
+    fmi3Boolean event = fmi3False, stop = fmi3False, early = fmi3False;
+    fmi3Float64 last = t;
+    int status = fmu->do_step3(fmu->c, t, h, fmi3True, &event, &stop, &early, &last);
+    *terminate = stop;
+    return status;
+}
+
+static void set_real(const Fmu *fmu, unsigned int vr, double value, const char *what)
+{
+    check(set_real_status(fmu, vr, value), what);
+}
+
+static void set_integer(const Fmu *fmu, unsigned int vr, int value, const char *what)
+{
+    check(set_integer_status(fmu, vr, value), what);
 }
 
 static double get_real(const Fmu *fmu, unsigned int vr)
 {
     double value;
-    if (fmu->version == 2) {
-        fmi2ValueReference r = vr;
-        check(fmu->get_real2(fmu->c, &r, 1, &value), "fmi2GetReal");
-    } else {
-        fmi3ValueReference r = vr;
-        check(fmu->get_real3(fmu->c, &r, 1, &value, 1), "fmi3GetFloat64");
-    }
+    check(get_real_status(fmu, vr, &value), fmu->version == 2 ? "fmi2GetReal" : "fmi3GetFloat64");
     return value;
 }
 
 static int get_integer(const Fmu *fmu, unsigned int vr)
 {
-    if (fmu->version == 2) {
-        fmi2ValueReference r = vr;
-        fmi2Integer value;
-        check(fmu->get_integer2(fmu->c, &r, 1, &value), "fmi2GetInteger");
-        return (int)value;
-    }
-    fmi3ValueReference r = vr;
-    fmi3Int32 value;
-    check(fmu->get_integer3(fmu->c, &r, 1, &value, 1), "fmi3GetInt32");
-    return (int)value;
+    int value;
+    check(get_integer_status(fmu, vr, &value), fmu->version == 2 ? "fmi2GetInteger" : "fmi3GetInt32");
+    return value;
 }
 
 static void set_inputs(const Fmu *fmu, const InputTable *inputs, const ModelDescription *md, double t)
@@ -462,31 +593,39 @@ static void set_inputs(const Fmu *fmu, const InputTable *inputs, const ModelDesc
         set_real(fmu, md->vars[inputs->var_index[col]].vr, input_at(inputs, col, t), "setting an input");
 }
 
+static int enter_initialization(const Fmu *fmu, double start, double stop)
+{
+    if (fmu->version == 2) {
+        int status = fmu->setup2(fmu->c, fmi2False, 0.0, start, fmi2True, stop);
+        return status != 0 ? status : (int)fmu->enter_init2(fmu->c);
+    }
+    return fmu->enter_init3(fmu->c, fmi3False, 0.0, start, fmi3True, stop);
+}
+
+static int exit_initialization(const Fmu *fmu)
+{
+    return fmu->version == 2 ? (int)fmu->exit_init2(fmu->c) : (int)fmu->exit_init3(fmu->c);
+}
+
 static void initialize(const Fmu *fmu, double start, double stop, const InputTable *inputs,
                        const ModelDescription *md)
 {
-    if (fmu->version == 2) {
-        check(fmu->setup2(fmu->c, fmi2False, 0.0, start, fmi2True, stop), "fmi2SetupExperiment");
-        set_inputs(fmu, inputs, md, start);
-        check(fmu->enter_init2(fmu->c), "fmi2EnterInitializationMode");
-        check(fmu->exit_init2(fmu->c), "fmi2ExitInitializationMode");
-    } else {
-        set_inputs(fmu, inputs, md, start);
-        check(fmu->enter_init3(fmu->c, fmi3False, 0.0, start, fmi3True, stop), "fmi3EnterInitializationMode");
-        check(fmu->exit_init3(fmu->c), "fmi3ExitInitializationMode");
-    }
+    set_inputs(fmu, inputs, md, start);
+    check(enter_initialization(fmu, start, stop), fmu->version == 2 ? "fmi2SetupExperiment, fmi2EnterInitializationMode"
+                                                                     : "fmi3EnterInitializationMode");
+    check(exit_initialization(fmu), fmu->version == 2 ? "fmi2ExitInitializationMode" : "fmi3ExitInitializationMode");
 }
 
 static void do_step(const Fmu *fmu, double t, double h)
 {
-    if (fmu->version == 2) {
-        check(fmu->do_step2(fmu->c, t, h, fmi2True), "fmi2DoStep");
-        return;
-    }
-    fmi3Boolean event = fmi3False, terminate = fmi3False, early = fmi3False;
-    fmi3Float64 last = t;
-    check(fmu->do_step3(fmu->c, t, h, fmi3True, &event, &terminate, &early, &last), "fmi3DoStep");
+    int terminate;
+    check(do_step_status(fmu, t, h, &terminate), fmu->version == 2 ? "fmi2DoStep" : "fmi3DoStep");
     if (terminate) die("fmi3DoStep at t = %.17g asked to terminate the simulation", t);
+}
+
+static void reset(const Fmu *fmu)
+{
+    check(fmu->version == 2 ? fmu->reset2(fmu->c) : fmu->reset3(fmu->c), fmu->version == 2 ? "fmi2Reset" : "fmi3Reset");
 }
 
 static void finish(const Fmu *fmu)
@@ -500,6 +639,57 @@ static void finish(const Fmu *fmu)
     }
 }
 
+/* -- --refusals: every call the FMU must refuse, each returning Error ------------------------------ */
+
+static void refused(int status, const char *what)
+{
+    if (status != 3) die("%s returned %s (%d), not Error", what, status_name(status), status);
+    fprintf(stderr, "native_host: refused as it must be (Error): %s\n", what);
+}
+
+static unsigned int vr_of(const ModelDescription *md, const char *name)
+{
+    int index = find_variable(md, name);
+    if (index < 0) die("--refusals: the FMU has no variable %s", name);
+    return md->vars[index].vr;
+}
+
+/* The project's FMU's refusals, by its variables' names (m: a parameter in (0, inf) kg,
+ * base_velocity: an input, impact_count: an Integer output, main_displacement: a Real one):
+ * bad values and wrong types or references in both modes, invalid start values, bad steps, a
+ * fixed parameter after initialization, then fmi2Reset / fmi3Reset. */
+static void check_refusals(const Fmu *fmu, const ModelDescription *md, double start, double stop)
+{
+    unsigned int m = vr_of(md, "m"), input = vr_of(md, "base_velocity"), count = vr_of(md, "impact_count");
+    unsigned int output = vr_of(md, "main_displacement"), missing = 1000000;
+    double real;
+    int integer, terminate;
+    refused(set_real_status(fmu, m, NAN), "setting m = nan");
+    refused(set_real_status(fmu, m, INFINITY), "setting m = inf");
+    refused(set_real_status(fmu, input, NAN), "setting base_velocity = nan");
+    refused(set_integer_status(fmu, m, 1), "setting the Real m as an Integer");
+    refused(set_real_status(fmu, count, 1.0), "setting the Integer impact_count as a Real");
+    refused(set_real_status(fmu, missing, 1.0), "setting value reference 1000000");
+    refused(get_real_status(fmu, count, &real), "getting the Integer impact_count as a Real");
+    refused(get_integer_status(fmu, output, &integer), "getting the Real main_displacement as an Integer");
+    refused(get_real_status(fmu, missing, &real), "getting value reference 1000000");
+    check(set_real_status(fmu, m, -1.0), "setting m = -1 (checked at the end of initialization)");
+    check(enter_initialization(fmu, start, stop), "entering initialization with m = -1");
+    refused(exit_initialization(fmu), "exiting initialization with m = -1");
+    reset(fmu);
+    check(enter_initialization(fmu, start, stop), "entering initialization");
+    check(exit_initialization(fmu), "exiting initialization");
+    refused(do_step_status(fmu, start, -1e-3, &terminate), "a step of size -1e-3 s");
+    refused(do_step_status(fmu, start, 0.0, &terminate), "a step of size 0 s");
+    refused(do_step_status(fmu, start + 0.5, 1e-3, &terminate), "a step from a time that does not continue");
+    refused(set_real_status(fmu, input, INFINITY), "setting base_velocity = inf while stepping");
+    refused(get_real_status(fmu, count, &real), "getting the Integer impact_count as a Real while stepping");
+    refused(set_real_status(fmu, m, 0.5), "setting the fixed parameter m = 0.5 after initialization");
+    reset(fmu);
+}
+
+/* -- one run --------------------------------------------------------------------------------------- */
+
 static void write_row(FILE *out, const Fmu *fmu, const ModelDescription *md, const int *outputs, int nout, double t)
 {
     fprintf(out, "%.17g", t);
@@ -511,56 +701,36 @@ static void write_row(FILE *out, const Fmu *fmu, const ModelDescription *md, con
     fprintf(out, "\n");
 }
 
-int main(int argc, char **argv)
+typedef struct {
+    const ModelDescription *md;
+    void *lib;
+    const char *abs_dir;
+    char out_path[PATH_MAX + 16];
+    const char *const *sets;
+    int nsets;
+    const InputTable *inputs;
+    double start, stop;
+    long long step_ns, nsteps;
+    int refusals;
+} Run;
+
+/* Instantiate, (check the refusals,) set the start values, run the grid, write the CSV, free. */
+static void simulate(void *argument)
 {
-    if (argc < 3) {
-        fprintf(stderr, "usage: %s FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV] "
-                        "[--set NAME=VALUE]...\n", argv[0]);
-        return 1;
-    }
-    const char *fmu_dir = argv[1], *out_path = argv[2], *in_path = NULL;
-    double stop = NAN, step = 1e-3, start = 0.0;
-    const char *sets[MAX_SETS];
-    int nsets = 0;
-    for (int i = 3; i < argc; i++) {
-        if (i + 1 >= argc) die("option %s needs a value", argv[i]);
-        if (strcmp(argv[i], "--stop") == 0) stop = strtod(argv[++i], NULL);
-        else if (strcmp(argv[i], "--step") == 0) step = strtod(argv[++i], NULL);
-        else if (strcmp(argv[i], "--start") == 0) start = strtod(argv[++i], NULL);
-        else if (strcmp(argv[i], "--in") == 0) in_path = argv[++i];
-        else if (strcmp(argv[i], "--set") == 0) {
-            if (nsets == MAX_SETS) die("too many --set");
-            sets[nsets++] = argv[++i];
-        } else die("unknown option %s", argv[i]);
-    }
-
-    ModelDescription *md = calloc(1, sizeof *md);
-    if (!md) die("out of memory");
-    parse_model_description(fmu_dir, md);
-    if (isnan(stop)) stop = md->has_default_stop ? md->default_stop : 1.0;
-    long long step_ns = llround(step * 1e9);
-    if (!(step_ns > 0)) die("the step must be at least 1 ns");
-    long long nsteps = llround((stop - start) * 1e9) / step_ns;
-
-    InputTable inputs = {0};
-    if (in_path) read_inputs(in_path, md, &inputs);
-
-    char abs_dir[PATH_MAX], library[PATH_MAX + 256];
-    if (!realpath(fmu_dir, abs_dir)) die("cannot resolve %s", fmu_dir);
-    snprintf(library, sizeof library, "%s/binaries/%s/%s.so", abs_dir,
-             md->fmi_version == 2 ? "linux64" : "x86_64-linux", md->model_identifier);
-    void *lib = dlopen(library, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) die("dlopen failed: %s", dlerror());
-
+    const Run *run = argument;
+    const ModelDescription *md = run->md;
     Fmu fmu = {0};
-    instantiate(&fmu, lib, md, abs_dir);
+    instantiate(&fmu, run->lib, md, run->abs_dir);
+    long long start_ns = llround(run->start * 1e9);
+    double t = (double)start_ns / 1e9;
+    if (run->refusals) check_refusals(&fmu, md, t, run->stop);
 
-    for (int i = 0; i < nsets; i++) {
+    for (int i = 0; i < run->nsets; i++) {
         char name[256], what[300];
-        const char *eq = strchr(sets[i], '=');
-        if (!eq || (size_t)(eq - sets[i]) >= sizeof name) die("--set %s: expected NAME=VALUE", sets[i]);
-        memcpy(name, sets[i], (size_t)(eq - sets[i]));
-        name[eq - sets[i]] = '\0';
+        const char *set = run->sets[i], *eq = strchr(set, '=');
+        if (!eq || (size_t)(eq - set) >= sizeof name) die("--set %s: expected NAME=VALUE", set);
+        memcpy(name, set, (size_t)(eq - set));
+        name[eq - set] = '\0';
         int index = find_variable(md, name);
         if (index < 0) die("--set: the FMU has no variable %s", name);
         snprintf(what, sizeof what, "setting %s = %s", name, eq + 1);
@@ -579,30 +749,88 @@ int main(int argc, char **argv)
             outputs[nout++] = i;
         }
 
-    FILE *out = fopen(out_path, "w");
-    if (!out) die("cannot write %s: %s", out_path, strerror(errno));
+    FILE *out = fopen(run->out_path, "w");
+    if (!out) die("cannot write %s: %s", run->out_path, strerror(errno));
     fprintf(out, "\"time\"");
     for (int j = 0; j < nout; j++) fprintf(out, ",\"%s\"", md->vars[outputs[j]].name);
     fprintf(out, "\n");
 
-    long long start_ns = llround(start * 1e9);
-    double t = (double)start_ns / 1e9;
-    initialize(&fmu, t, stop, &inputs, md);
+    initialize(&fmu, t, run->stop, run->inputs, md);
     write_row(out, &fmu, md, outputs, nout, t);
-    for (long long k = 0; k < nsteps; k++) {
-        double t_next = (double)(start_ns + (k + 1) * step_ns) / 1e9;
-        set_inputs(&fmu, &inputs, md, t);
+    for (long long k = 0; k < run->nsteps; k++) {
+        double t_next = (double)(start_ns + (k + 1) * run->step_ns) / 1e9;
+        set_inputs(&fmu, run->inputs, md, t);
         do_step(&fmu, t, t_next - t);
         t = t_next;
         write_row(out, &fmu, md, outputs, nout, t);
     }
-
     finish(&fmu);
-    if (fclose(out) != 0) die("cannot close %s", out_path);
+    if (fclose(out) != 0) die("cannot close %s", run->out_path);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 3) {
+        fprintf(stderr, "usage: %s FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV] "
+                        "[--set NAME=VALUE]... [--refusals] [--threads N]\n", argv[0]);
+        return 1;
+    }
+    const char *fmu_dir = argv[1], *out_path = argv[2], *in_path = NULL;
+    double stop = NAN, step = 1e-3, start = 0.0;
+    const char *sets[MAX_SETS];
+    int nsets = 0, refusals = 0, threads = 0;
+    for (int i = 3; i < argc; i++) {
+        if (strcmp(argv[i], "--refusals") == 0) {
+            refusals = 1;
+            continue;
+        }
+        if (i + 1 >= argc) die("option %s needs a value", argv[i]);
+        if (strcmp(argv[i], "--stop") == 0) stop = strtod(argv[++i], NULL);
+        else if (strcmp(argv[i], "--step") == 0) step = strtod(argv[++i], NULL);
+        else if (strcmp(argv[i], "--start") == 0) start = strtod(argv[++i], NULL);
+        else if (strcmp(argv[i], "--in") == 0) in_path = argv[++i];
+        else if (strcmp(argv[i], "--threads") == 0) threads = atoi(argv[++i]);
+        else if (strcmp(argv[i], "--set") == 0) {
+            if (nsets == MAX_SETS) die("too many --set");
+            sets[nsets++] = argv[++i];
+        } else die("unknown option %s", argv[i]);
+    }
+    if (threads < 0 || threads > MAX_THREADS) die("--threads %d: allowed range [1, %d]", threads, MAX_THREADS);
+
+    ModelDescription *md = calloc(1, sizeof *md);
+    if (!md) die("out of memory");
+    parse_model_description(fmu_dir, md);
+    if (isnan(stop)) stop = md->has_default_stop ? md->default_stop : 1.0;
+    long long step_ns = llround(step * 1e9);
+    if (!(step_ns > 0)) die("the step must be at least 1 ns");
+
+    InputTable inputs = {0};
+    if (in_path) read_inputs(in_path, md, &inputs);
+
+    char abs_dir[PATH_MAX], library[PATH_MAX + 256];
+    if (!absolute_path(fmu_dir, abs_dir, sizeof abs_dir)) die("cannot resolve %s", fmu_dir);
+    snprintf(library, sizeof library, "%s/binaries/%s/%s%s", abs_dir, md->fmi_version == 2 ? PLATFORM2 : PLATFORM3,
+             md->model_identifier, LIBRARY_SUFFIX);
+    void *lib = open_library(library);
+    if (!lib) die("cannot load %s: %s", library, library_error());
+
+    Run runs[MAX_THREADS];
+    for (int k = 0; k < (threads ? threads : 1); k++) {
+        runs[k] = (Run){md, lib, abs_dir, "", sets, nsets, &inputs, start, stop, step_ns,
+                        llround((stop - start) * 1e9) / step_ns, refusals};
+        snprintf(runs[k].out_path, sizeof runs[k].out_path, threads ? "%s.%d" : "%s", out_path, k + 1);
+    }
+    if (!threads) simulate(&runs[0]);
+    else {
+        Thread ids[MAX_THREADS];
+        for (int k = 0; k < threads; k++)
+            if (!start_thread(&ids[k], simulate, &runs[k])) die("cannot start thread %d", k + 1);
+        for (int k = 0; k < threads; k++) join_thread(ids[k]);
+    }
     free(inputs.time);
     free(inputs.values);
     free(md);
-    /* The binary is not dlclose'd, and the process leaves without exit-time teardown (leave). */
+    /* The binary is not unloaded, and the process leaves without exit-time teardown (leave). */
     leave(0);
     return 0;
 }

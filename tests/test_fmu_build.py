@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import io
+import math
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -24,6 +25,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
+from piezo_fmu import parameter_info
 from piezo_fmu.build import archive
 from piezo_fmu.build import fmus as build
 from piezo_fmu.fmi import variables
@@ -139,3 +141,27 @@ def test_both_fmus_bundle_the_same_package_which_a_host_process_imports_once():
         assert package == {name for name in three.namelist() if name.startswith("resources/piezo_fmu/")}
         assert "resources/piezo_fmu/fmi/me.py" in package
         assert all(two.read(name) == three.read(name) for name in package)
+
+
+@pytest.mark.parametrize("target", TARGETS, ids=IDS)
+def test_the_declared_bounds_allow_exactly_the_values_the_fmu_accepts(target):
+    """FMI has no exclusive bounds: an open end is declared as the nearest double inside it (``m``
+    in (0, inf) kg declares min="5e-324"), so a host that trusts min/max foresees every refusal of
+    a single value: the declared end is accepted and the next double outside it is refused."""
+    bounds = {name: info["bound"] for name, info in parameter_info().items()}
+    md = read_model_description(str(ROOT / target.dest))
+    checked = 0
+    for variable in md.modelVariables:
+        if variable.causality != "parameter" or variable.name not in bounds:
+            continue
+        bound = bounds[variable.name]
+        for declared, outward, limit in ((variable.min, -math.inf, bound.lo), (variable.max, math.inf, bound.hi)):
+            if declared is None:
+                assert not math.isfinite(limit), f"{variable.name}: the bound end {limit} is not declared"
+                continue
+            declared = float(declared)
+            assert bound.contains(declared), f"{variable.name}: declared {declared} is refused ({bound.describe()})"
+            assert not bound.contains(math.nextafter(declared, outward)), f"{variable.name}: {declared} is not the end"
+            checked += 1
+    assert md.modelVariables[[v.name for v in md.modelVariables].index("m")].min in ("5e-324", 5e-324)
+    assert checked >= 25

@@ -59,7 +59,7 @@ def test_c_host_cannot_load_pythonfmus_own_binary(host, tmp_path):
     completed = subprocess.run([str(host), str(tmp_path / "fmu"), str(tmp_path / "out.csv"), "--stop", "0.01"],
                                capture_output=True, text=True, env=native.environment(), timeout=60)
     assert completed.returncode == 1
-    assert "dlopen failed" in completed.stderr and "undefined symbol" in completed.stderr
+    assert "native_host: cannot load " in completed.stderr and "undefined symbol" in completed.stderr
 
 
 @lru_cache(maxsize=None)
@@ -119,6 +119,26 @@ def test_c_host_reports_fmu_errors_with_status_1(host, tmp_path, start_value, wo
         native.run(FMU, tmp_path / "bad.csv", ["--stop", "0.01", "--set", start_value], executable=host)
     assert failure.value.returncode == 1 and "fmi2ExitInitializationMode returned Error (3)" in failure.value.stderr
     assert f"invalid start values: {words}" in failure.value.stderr  # the FMU's own message
+
+
+def test_c_host_refusals_each_return_error_and_the_reset_instance_gives_a_fresh_ones_bits(host, tmp_path):
+    """``--refusals`` (every call the FMU must refuse, then Reset) on Linux, as tests/test_windows.py
+    runs it on Windows: the host exits 0 only if each refusal returned Error and all else OK."""
+    fresh, after_reset = tmp_path / "fresh.csv", tmp_path / "after_reset.csv"
+    args = ["--stop", "0.5", "--step", repr(NOMINAL_STEP)]
+    native.run(FMU, fresh, args, executable=host)
+    completed = native.run(FMU, after_reset, [*args, "--refusals"], executable=host)
+    assert completed.stderr.count("native_host: refused as it must be (Error): ") == 16
+    assert after_reset.read_bytes() == fresh.read_bytes()
+
+
+def test_c_host_two_instances_in_two_threads_give_the_bits_of_one_alone(host, tmp_path):
+    alone, threads = tmp_path / "alone.csv", tmp_path / "threads.csv"
+    args = ["--stop", "0.5", "--step", repr(NOMINAL_STEP)]
+    native.run(FMU, alone, args, executable=host)
+    native.run(FMU.with_name("PiezoImpactDamper3.fmu"), threads, [*args, "--threads", "2"], executable=host)
+    for k in (1, 2):
+        assert Path(f"{threads}.{k}").read_bytes() == alone.read_bytes()
 
 
 # -- the host model ------------------------------------------------------------------------------------

@@ -38,7 +38,8 @@ sys.path.insert(0, str(REPO))
 
 from hosts import native  # noqa: E402
 from piezo_fmu.build import archive as fmu_archive  # noqa: E402
-from piezo_fmu.build.loader import LINUX_BINARIES, REAL_SUFFIX, compile_loader, install_loader  # noqa: E402
+from piezo_fmu.build.loader import (BINARIES, LIBRARY_SUFFIX, LINUX_BINARIES, PLATFORMS, REAL_SUFFIXES,  # noqa: E402
+                                  compile_loader, install_loader)
 from piezo_fmu.build.loader.generate import api, pythonfmu3_unimplemented  # noqa: E402
 from tests.loader_slaves import SLAVE_2, SLAVE_3, SOURCE_2, SOURCE_3  # noqa: E402
 
@@ -390,21 +391,34 @@ def test_the_loader_exports_the_whole_fmi_api_of_its_version(tmp_path, version):
     assert [name for name in names if not hasattr(loaded, name)] == []
 
 
+@pytest.mark.parametrize("platform", PLATFORMS)
 @pytest.mark.parametrize("version", [2, 3])
-def test_the_loader_is_byte_reproducible(version):
-    assert compile_loader.__wrapped__(version) == compile_loader.__wrapped__(version)
+def test_the_loader_is_byte_reproducible(version, platform):
+    assert compile_loader.__wrapped__(version, platform) == compile_loader.__wrapped__(version, platform)
 
 
-@pytest.mark.parametrize("version, fmu, windows", [
-    (2, FMU, "binaries/win64/PiezoImpactDamper.dll"),
-    (3, FMU.with_name("PiezoImpactDamper3.fmu"), "binaries/x86_64-windows/PiezoImpactDamper3.dll"),
-])
-def test_the_committed_fmus_have_the_loader_and_pythonfmus_binary_beside_it(version, fmu, windows):
-    binary = f"{LINUX_BINARIES[version]}/{fmu.stem}"
+def test_the_windows_loader_has_no_timestamp_and_imports_only_windows_own_dlls():
+    """A PE file stamps its link time (the COFF header's TimeDateStamp) unless told not to."""
+    import struct
+
+    for version in (2, 3):
+        binary = compile_loader(version, "windows")
+        pe = struct.unpack_from("<I", binary, 0x3C)[0]
+        assert binary[pe:pe + 4] == b"PE\0\0"
+        assert struct.unpack_from("<I", binary, pe + 8)[0] == 0
+        imported = {name.lower() for name in
+                    (b"ADVAPI32.dll", b"KERNEL32.dll", b"msvcrt.dll", b"libgcc_s_seh-1.dll", b"libwinpthread-1.dll")
+                    if name in binary}
+        assert imported == {b"advapi32.dll", b"kernel32.dll", b"msvcrt.dll"}
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+@pytest.mark.parametrize("version, fmu", [(2, FMU), (3, FMU.with_name("PiezoImpactDamper3.fmu"))])
+def test_the_committed_fmus_have_the_loader_and_pythonfmus_binary_beside_it(version, fmu, platform):
+    binary = f"{BINARIES[platform, version]}/{fmu.stem}"
     with zipfile.ZipFile(fmu) as archive:
         names = set(archive.namelist())
-        loader = archive.read(f"{binary}.so")
-    assert f"{binary}{REAL_SUFFIX}" in names
-    assert windows in names  # pythonfmu's, which finds python3.dll itself
-    assert loader == compile_loader(version)
+        loader = archive.read(f"{binary}{LIBRARY_SUFFIX[platform]}")
+    assert f"{binary}{REAL_SUFFIXES[platform]}" in names
+    assert loader == compile_loader(version, platform)
     assert not any(name.startswith("resources/piezo_fmu/build/loader") for name in names)

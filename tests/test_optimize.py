@@ -105,7 +105,7 @@ def test_an_interrupted_optimisation_resumes_from_its_log_and_loses_nothing(perf
     (["--param", "m=0.2:0.02"], ["--param m=0.2:0.02", "reversed range for m", "LO = 0.2"]),
     (["--param", "mass=0.02:0.2"], ["unknown parameter 'mass'"]),
     (["--param", "m=0.02"], ["--param m=0.02", "expected NAME=LO:HI"]),
-    (["--param", "m=-1:0.2"], ["m = -1.0 is below its minimum 0"]),
+    (["--param", "m=-1:0.2"], ["m = -1.0 is not above 0"]),
     (["--param", "barrier_mode=0:1"], ["barrier_mode is an Integer parameter"]),
     (["--param", "m=0.02:0.2", "--set", "m=0.1"], ["m is both searched (--param) and fixed (--set)"]),
     (["--param", "x1=0:0.075"], ["the bounds of --param", "the FMU rejects", "x1 + L_p must be <= L"]),

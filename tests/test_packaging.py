@@ -91,7 +91,9 @@ def test_the_sdist_carries_what_a_wheel_is_built_from(dist):
     with tarfile.open(dist["sdist"]) as sdist:
         names = {name.split("/", 1)[1] for name in sdist.getnames() if "/" in name}
     assert {"LICENSE", "README.md", "pyproject.toml", "fmus/PiezoImpactDamper.fmu", "fmus/PiezoImpactDamper3.fmu",
-            "src/piezo_fmu/build/loader/loader.c", "src/piezo_fmu_harness/fmus.py"} <= names
+            "src/piezo_fmu/build/loader/loader.c", "src/piezo_fmu/build/loader/platform.h",
+            "src/piezo_fmu/build/loader/platform_posix.c", "src/piezo_fmu/build/loader/platform_windows.c",
+            "src/piezo_fmu_harness/fmus.py"} <= names
 
 
 # -- the wheel in a fresh environment --------------------------------------------------------------

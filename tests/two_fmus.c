@@ -6,16 +6,36 @@
  * Instantiates the FMI 2.0 FMU (extracted in FMU2_DIR, model identifier ID2), then the FMI 3.0
  * one, initializes both and prints the Integer / Int32 output with value reference VR2 / VR3 of
  * each, one line each. tests/test_loader.py reads with it a counter that the slaves keep in
- * their interpreter, to show that the two FMUs share one. Exit status 1 on any failure.
+ * their interpreter, to show that the two FMUs share one; tests/test_windows.py builds it with
+ * mingw-w64 and does the same under Wine (FMU_DIR then a Windows path). Exit status 1 on any
+ * failure.
  */
 
 #define _XOPEN_SOURCE 700
 
-#include <dlfcn.h>
 #include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+
+#ifdef _WIN32
+#include <windows.h>
+#define PLATFORM2 "win64"
+#define PLATFORM3 "x86_64-windows"
+#define SUFFIX ".dll"
+#define URI_ROOT "file:///"
+#define load(path) ((void *)LoadLibraryExA(path, NULL, LOAD_WITH_ALTERED_SEARCH_PATH))
+#define dlsym(lib, name) ((void *)GetProcAddress((HMODULE)(lib), name))
+#define dlerror() "LoadLibraryExA failed"
+#else
+#include <dlfcn.h>
 #include <unistd.h>
+#define PLATFORM2 "linux64"
+#define PLATFORM3 "x86_64-linux"
+#define SUFFIX ".so"
+#define URI_ROOT "file://"
+#define load(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
+#endif
 
 #include "fmi2FunctionTypes.h"
 #include "fmi3FunctionTypes.h"
@@ -30,8 +50,8 @@ static void fail(const char *what)
 static void *open_binary(const char *dir, const char *platform, const char *id)
 {
     char path[PATH_MAX];
-    snprintf(path, sizeof path, "%s/binaries/%s/%s.so", dir, platform, id);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    snprintf(path, sizeof path, "%s/binaries/%s/%s" SUFFIX, dir, platform, id);
+    void *lib = load(path);
     if (!lib) fail(dlerror());
     return lib;
 }
@@ -61,8 +81,10 @@ int main(int argc, char **argv)
     if (argc != 9) fail("usage: two_fmus FMU2_DIR ID2 GUID2 VR2 FMU3_DIR ID3 TOKEN3 VR3");
     char uri[PATH_MAX + 32], resources[PATH_MAX + 32];
 
-    void *lib2 = open_binary(argv[1], "linux64", argv[2]);
-    snprintf(uri, sizeof uri, "file://%s/resources", argv[1]);
+    void *lib2 = open_binary(argv[1], PLATFORM2, argv[2]);
+    snprintf(uri, sizeof uri, URI_ROOT "%s/resources", argv[1]);
+    for (char *p = uri; *p; p++)
+        if (*p == '\\') *p = '/';
     static fmi2CallbackFunctions callbacks = {logger2, calloc, free, NULL, NULL};
     fmi2Component c2 = ((fmi2InstantiateTYPE *)symbol(lib2, "fmi2Instantiate"))(
         "fmi2", fmi2CoSimulation, argv[3], uri, &callbacks, fmi2False, fmi2False);
@@ -71,7 +93,7 @@ int main(int argc, char **argv)
         ((fmi2ExitInitializationModeTYPE *)symbol(lib2, "fmi2ExitInitializationMode"))(c2) != fmi2OK)
         fail("FMI 2.0 initialization");
 
-    void *lib3 = open_binary(argv[5], "x86_64-linux", argv[6]);
+    void *lib3 = open_binary(argv[5], PLATFORM3, argv[6]);
     snprintf(resources, sizeof resources, "%s/resources/", argv[5]);
     fmi3Instance c3 = ((fmi3InstantiateCoSimulationTYPE *)symbol(lib3, "fmi3InstantiateCoSimulation"))(
         "fmi3", argv[7], resources, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL, logger3, NULL);

@@ -66,6 +66,11 @@ def default_fmu_path() -> Path:
     return fmus.path(fmi_version=2)
 
 
+#: The least positive double: the ``min`` that declares a range open at 0 (FMI has no exclusive
+#: bounds; see :mod:`piezo_fmu.fmi.variables`).
+OPEN_AT_ZERO = math.nextafter(0.0, math.inf)
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One FMU parameter as its modelDescription declares it (SI units)."""
@@ -80,10 +85,11 @@ class Parameter:
     description: str
 
     def bounds_text(self) -> str:
-        lo = "-inf" if self.min is None else f"{self.min:g}"
+        open_at_zero = self.min == OPEN_AT_ZERO
+        lo = "-inf" if self.min is None else "0" if open_at_zero else f"{self.min:g}"
         hi = "inf" if self.max is None else f"{self.max:g}"
         unit = f" {self.unit}" if self.unit else ""
-        return f"[{lo}, {hi}]{unit}"
+        return f"{'(' if open_at_zero else '['}{lo}, {hi}]{unit}"
 
     def coerce(self, value) -> float | int:
         """``value`` as this parameter's type, within the modelDescription's min and max.
@@ -101,7 +107,8 @@ class Parameter:
                 raise ValueError(f"{self.name} = {value!r} is not an integer ({self.name} is an Integer parameter)")
             number = int(round(number))
         if self.min is not None and number < self.min:
-            raise ValueError(f"{self.name} = {value!r} is below its minimum {self.min:g}; "
+            below = "is not above 0" if self.min == OPEN_AT_ZERO else f"is below its minimum {self.min:g}"
+            raise ValueError(f"{self.name} = {value!r} {below}; "
                              f"allowed range {self.bounds_text()} (from the FMU's modelDescription)")
         if self.max is not None and number > self.max:
             raise ValueError(f"{self.name} = {value!r} is above its maximum {self.max:g}; "

@@ -19,9 +19,10 @@ written with sorted entries, fixed timestamps and modes, stored uncompressed, wi
 ``__pycache__`` (:mod:`piezo_fmu.build.archive`). A rebuild from the same sources is byte-identical,
 which is what ``--check`` relies on.
 
-Each FMU's linux binary is the project's loader (:mod:`piezo_fmu.build.loader`, compiled here: it
-finds a Python for a native host and returns Error for a refused call); pythonfmu's binary,
-mended, is kept beside it as ``<modelIdentifier>.pythonfmu.so``.
+Each FMU's linux and Windows binaries are the project's loader (:mod:`piezo_fmu.build.loader`,
+compiled here, for Windows with mingw-w64: it finds a Python for a native host and returns Error
+for a refused call); pythonfmu's binaries are kept beside it as
+``<modelIdentifier>.pythonfmu.so`` (mended) and ``<modelIdentifier>.pythonfmu.dll``.
 
 Each FMU carries the core (the ``piezo_fmu`` package, less the build, the slaves and the loader's
 sources) and its slave as a top-level module in ``resources/``. At run time it needs a Python 3

@@ -38,6 +38,19 @@ class Variable(NamedTuple):
     undefined_is_zero: bool = False  # outputs only
 
 
+def _declared(limit: float, open_: bool, toward: float) -> Optional[float]:
+    """The ``min`` (``toward`` = +inf) or ``max`` (-inf) that declares a bound end exactly.
+
+    FMI has no exclusive bounds: an open end is declared as the nearest double inside it, so
+    that the doubles the modelDescription allows are exactly those the FMU accepts (``m`` in
+    (0, inf) declares ``min="5e-324"``, the least positive double). A host that trusts
+    ``min``/``max`` foresees every refusal of a single value.
+    """
+    if not math.isfinite(limit):
+        return None
+    return math.nextafter(limit, toward) if open_ else limit
+
+
 def _parameter_variables() -> tuple:
     """Every core parameter, under its own name, unit, description, bound and default.
 
@@ -53,8 +66,8 @@ def _parameter_variables() -> tuple:
             causality="parameter",
             unit=None if is_integer else info["unit"],
             description=info["description"],
-            min=bound.lo if math.isfinite(bound.lo) else None,
-            max=bound.hi if math.isfinite(bound.hi) else None,
+            min=_declared(bound.lo, bound.lo_open, math.inf),
+            max=_declared(bound.hi, bound.hi_open, -math.inf),
             start=info["default"],
         ))
     return tuple(table)

