@@ -61,12 +61,14 @@ def measure_restitution(instance, factor: float, speed: float = 0.1, d: float = 
 
 
 def closed_form(case: str, e: float):
-    """The system and its (one) admissible symmetric two-impact orbit, the orbit's multipliers."""
+    """The system, its admissible symmetric two-impact orbit of smaller largest multiplier (of
+    the quadratic's two roots, the branch that is stable at 1.2 w_n; at both ratios the other
+    root is an orbit of larger amplitude with multipliers above 4), and its multipliers."""
     ratio, d, C, Y = CASES[case]
     system = System(M, K, C, m, d, e, Y, ratio * math.sqrt(K / M))
     found = admissible_orbits(system)
     assert len(found) >= 1, case
-    orbit = min(found, key=lambda o: abs(multipliers(o)[0]))  # the branch the cases are about
+    orbit = min(found, key=lambda o: abs(multipliers(o)[0]))
     return system, orbit, multipliers(orbit)
 
 
