@@ -86,7 +86,7 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, tmp_path):
     (["--ratio", "-1"], ["--ratio -1", "allowed range (0, inf)"]),
     (["--ratio", "1.2", "--p0=0:0.01:0"], ["--p0 0:0.01:0", "empty grid", "allowed range [1, inf)"]),
     (["--ratio", "1.2", "--dp0=0.1:-0.1:3"], ["--dp0 0.1:-0.1:3", "reversed range"]),
-    (["--ratio", "1.2", "--set", "m=-1"], ["m = -1.0", "minimum"]),
+    (["--ratio", "1.2", "--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--ratio", "1.2", "--amplitude", "0"], ["--amplitude 0", "allowed range (0, inf) m"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):

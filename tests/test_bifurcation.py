@@ -51,7 +51,7 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
     (["--ratio-min", "0"], ["--ratio-min 0", "allowed range (0, inf)"]),
     (["--ratio-min", "1.2", "--ratio-max", "1.1"], ["--ratio-min 1.2", "reversed range"]),
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
-    (["--set", "m=-1"], ["m = -1.0", "minimum"]),
+    (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -108,7 +108,7 @@ def test_the_results_carry_branches_stability_and_events(study):
     (["--ratio-min", "0.9", "--ratio-max", "0.8"], ["--ratio-min 0.9", "reversed range"]),
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
     (["--count", "0"], ["--count 0", "allowed range [2, inf)"]),
-    (["--set", "m=-1"], ["m = -1.0", "minimum"]),
+    (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--parameter", "m", "--range=-1:0.1"], ["--range -1:0.1", "m = -1"]),
     (["--parameter", "m", "--range", "0.2:0.1"], ["--range 0.2:0.1", "reversed range"]),
     (["--parameter", "p0", "--range", "0:1"], ["--parameter p0", "not a parameter that can be continued"]),
