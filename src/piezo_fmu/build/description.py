@@ -82,7 +82,7 @@ def _common(root: ET.Element, identity: str, capabilities: dict, interfaces: Ite
     """What both versions need: no build time, the build named, the identity left empty, the
     package's version, the capability flags set on each interface element that has them."""
     root.attrib.pop("generationDateAndTime", None)  # a timestamp would break reproducibility
-    root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.fmi.build")
+    root.set("generationTool", f"{root.get('generationTool')} via piezo_fmu.build")
     root.set(identity, "")
     root.set("version", __version__)
     for interface in interfaces:

@@ -4,8 +4,8 @@
 - :mod:`.cosim`: co-simulation behaviour shared by every FMI version;
 - :mod:`.me`, :mod:`.me_run`: Model Exchange (FMI 3.0), on the model's equations;
 - :mod:`.fmi2`, :mod:`.fmi3`: the FMI 2.0 and FMI 3.0 slaves (pythonfmu, pythonfmu3);
-- :mod:`.build`: the reproducible build of the FMUs;
-- :mod:`.loader`: the FMUs' linux binary, in front of pythonfmu's (C, compiled by the build).
+(the reproducible build of the FMUs and their loader are in :mod:`piezo_fmu.build`, apart from what
+runs inside them).
 
 Importing this package imports the modules every slave runs on (and with them the core), never
 pythonfmu: a host process imports the bundled package once, from the first FMU it loads, and may

@@ -2,7 +2,7 @@
 
 A thin adapter: pythonfmu's calls are mapped onto :class:`piezo_fmu.fmi.cosim.CoSimulation`, and
 the variables are those of :data:`piezo_fmu.fmi.variables.VARIABLES`; there is no physics here.
-:mod:`piezo_fmu.fmi.build` turns this script into ``fmus/PiezoImpactDamper.fmu`` and completes the
+:mod:`piezo_fmu.build` turns this script into ``fmus/PiezoImpactDamper.fmu`` and completes the
 modelDescription with the units, bounds and structure the table declares.
 
 Inside the FMU this file is the top-level module ``piezo_fmu_slave`` and imports the core from
@@ -14,7 +14,7 @@ releases objects it still uses). A refused value or call (a wrong value referenc
 output set, a non-finite value, a parameter set after initialization, invalid start values at
 ExitInitializationMode, a bad step size, a step that does not continue from the FMU's time, a
 non-finite input) is logged with the error status, naming the variable, the value and the allowed
-range; the FMU's loader (``piezo_fmu.fmi.loader``) returns fmi2Error from that very call, and
+range; the FMU's loader (``piezo_fmu.build.loader``) returns fmi2Error from that very call, and
 fmi2Reset brings the instance back. Something unexpected is logged with the fatal status.
 """
 

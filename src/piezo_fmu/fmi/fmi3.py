@@ -6,7 +6,7 @@ one's bits at the same communication points, and onto :class:`piezo_fmu.fmi.me.M
 The variables are those of :data:`piezo_fmu.fmi.variables.VARIABLES` under the same value
 references (Real as Float64, Integer as Int32), followed by the independent variable ``time`` and
 the locals of Model Exchange (:data:`piezo_fmu.fmi.variables.MODEL_EXCHANGE`).
-:mod:`piezo_fmu.fmi.build` turns this script into ``fmus/PiezoImpactDamper3.fmu`` and completes its
+:mod:`piezo_fmu.build` turns this script into ``fmus/PiezoImpactDamper3.fmu`` and completes its
 modelDescription.
 
 pythonfmu3 does not tell the slave which interface the host instantiated. The first call that

@@ -3,7 +3,7 @@ descriptions and start values, and how a co-simulation reads each output from th
 
 Every interface is built from :data:`VARIABLES`: the FMI 2.0 co-simulation slave
 (:mod:`piezo_fmu.fmi.fmi2`), the FMI 3.0 one (:mod:`piezo_fmu.fmi.fmi3`), and the build, which
-writes units, bounds and structure into each modelDescription (:mod:`piezo_fmu.fmi.build`). The
+writes units, bounds and structure into each modelDescription (:mod:`piezo_fmu.build`). The
 value reference of a variable is its index in the table; groups were appended over time so that
 no value reference ever moved.
 """
@@ -19,7 +19,7 @@ from piezo_fmu import parameter_info
 class Variable(NamedTuple):
     """One FMU variable: what the modelDescription says of it and how to read it from the core.
 
-    ``unit``, ``min`` and ``max`` are written by :mod:`piezo_fmu.fmi.build` (pythonfmu writes
+    ``unit``, ``min`` and ``max`` are written by :mod:`piezo_fmu.build` (pythonfmu writes
     none of them). An output's value is the core's reading of the same name
     (:meth:`piezo_fmu.Simulator.readings`), 0 where ``undefined_is_zero`` and the reading is NaN
     (a metric not defined yet); ``read`` maps the :class:`piezo_fmu.Damper` to a calculated
