@@ -81,3 +81,12 @@ def engine_once(sub) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler")
     where.add_argument("--dask-local", action="store_true", help="run on a local dask.distributed cluster")
     sub.add_argument("--force", action="store_true", help="replace the results in --out")
+
+
+def time_series(sub, name: str) -> None:
+    """The options of a study that writes one run's time series: its duration, its sampling
+    (default :data:`piezo_fmu_harness.series.NOMINAL_STEP`), the model's options and ``--out``."""
+    from .series import NOMINAL_STEP
+
+    common(sub, NOMINAL_STEP, "the time series' sampling")
+    results_folder(sub, name)

@@ -126,6 +126,19 @@ def rest_state() -> list[float]:
     return [0.0] * len(STATE_PARAMETERS)
 
 
+def solve_chain(instance: Instance, points, settings: Settings) -> list[dict]:
+    """A sweep in one process: the steady state at each of ``points`` (``(values, omega, amplitude)``
+    in SI, in the sweep's order), each from the previous one's final state, from rest; a point the
+    FMU rejects leaves the guess as it was."""
+    state, phase, records = rest_state(), 0.0, []
+    for index, (values, omega, amplitude) in enumerate(points):
+        record = solve_point(instance, index, values, omega, amplitude, settings, state, phase)
+        if record.get("status") == "ok":
+            state, phase = record["state"], record["phase"]
+        records.append(record)
+    return records
+
+
 def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searched: tuple = ()):
     """The study the options ask for, checked (values, ranges, and the FMU's own checks);
     ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the

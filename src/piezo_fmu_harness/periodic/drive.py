@@ -212,6 +212,14 @@ def hermite_extrema(p: np.ndarray, v: np.ndarray, h: float) -> tuple[float, floa
     return float(values.max()), float(values.min())
 
 
+def period_swings(data: np.ndarray, drive: HarmonicDrive) -> list[float]:
+    """Half the peak-to-peak of ``p`` (m) within each forcing period of ``data``, the states after
+    each step (the first row the start), ``drive.samples`` steps a period."""
+    n = drive.samples
+    return [0.5 * float(np.subtract(*hermite_extrema(data[k * n:(k + 1) * n + 1, 0], data[k * n:(k + 1) * n + 1, 1],
+                                                      drive.h))) for k in range((len(data) - 1) // n)]
+
+
 def measure(drive: HarmonicDrive, orbits_periods: int) -> dict:
     """Run ``orbits_periods`` more periods on ``drive`` and return the steady-state measures
     over them (see the module's text)."""
@@ -226,9 +234,7 @@ def measure(drive: HarmonicDrive, orbits_periods: int) -> dict:
     data = np.array(samples)
     p, v = data[:, 0], data[:, 1]
     top, bottom = hermite_extrema(p, v, drive.h)
-    n = drive.samples
-    envelope = [0.5 * np.subtract(*hermite_extrema(p[k * n:(k + 1) * n + 1], v[k * n:(k + 1) * n + 1], drive.h))
-                for k in range(orbits_periods)]
+    envelope = period_swings(data, drive)
     impacts = count1 - count0
     done0, done1 = completed(data[0], count0), completed(data[-1], count1)
     # The square of voltage_rms times the completed impacts is the sum of their squares.

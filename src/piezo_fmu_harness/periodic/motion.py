@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from .drive import HarmonicDrive, hermite_extrema
+from .drive import HarmonicDrive, period_swings
 
 #: Largest Lyapunov exponent (per forcing period) beyond which a motion is chaotic.
 CHAOS = 0.05
@@ -55,10 +55,7 @@ def classify(drive: HarmonicDrive, periods: int = 40) -> dict:
     finally:
         drive.restore(saved)
         drive.release(saved)
-    data = np.array([first] + record)
-    n = drive.samples
-    swings = [0.5 * np.subtract(*hermite_extrema(data[k * n:(k + 1) * n + 1, 0], data[k * n:(k + 1) * n + 1, 1],
-                                                  drive.h)) for k in range(periods)]
+    swings = period_swings(np.array([first] + record), drive)
     modulation = (max(swings) - min(swings)) / max(swings) if max(swings) > 0 else 0.0
     if counted == 0:
         motion = "unclassified"

@@ -147,9 +147,8 @@ def command(args) -> int:
 
 def register(commands) -> None:
     """``piezo-fmu nominal``."""
-    from ..options import common, results_folder
+    from ..options import time_series
 
     nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series, summary, figures")
-    common(nominal, 1e-4, "the time series' sampling")
-    results_folder(nominal, "nominal")
+    time_series(nominal, "nominal")
     nominal.set_defaults(run=command)

@@ -170,9 +170,8 @@ def command(args) -> int:
 
 def register(commands) -> None:
     """``piezo-fmu two-designs``."""
-    from ..options import common, results_folder
+    from ..options import time_series
 
     two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
-    common(two, 1e-4, "the time series' sampling")
-    results_folder(two, "two-designs")
+    time_series(two, "two-designs")
     two.set_defaults(run=command)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ...datasets import bands
-from ...periodic.band import FrequencySpec, rest_state, solve_point
+from ...periodic.band import FrequencySpec, solve_chain
 from ...periodic.steady_state import Settings
 
 DIRECTIONS = ("up", "down")
@@ -38,15 +38,13 @@ CLASSES = ("periodic", "quasi-periodic", "strongly modulated", "chaotic", "trans
 def sweep(instance, spec: dict, direction: str) -> dict:
     """One sweep of the diagram (a task): each frequency's steady state from the previous state,
     with its section samples of ``p`` (m)."""
-    values, settings = spec["values"], Settings(**spec["settings"])
     ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
-    state, phase, points = rest_state(), 0.0, []
-    for ratio in ratios:
-        omega = ratio * spec["natural"]
-        amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
-        record = solve_point(instance, 0, values, omega, amplitude, settings, state, phase)
-        if record.get("status") == "ok":
-            state, phase = record["state"], record["phase"]
+    omegas = [ratio * spec["natural"] for ratio in ratios]
+    records = solve_chain(instance, [(spec["values"], omega, spec["amplitude"] if spec["amplitude"] is not None
+                                      else spec["acceleration"] / omega**2) for omega in omegas],
+                          Settings(**spec["settings"]))
+    points = []
+    for ratio, record in zip(ratios, records):
         points.append({"ratio": ratio, "status": record.get("status"), "motion": record.get("motion", "error"),
                        "samples": [s[0] for s in record.get("sections") or []],
                        "impacts_per_cycle": record.get("impacts_per_cycle"), "order": record.get("order"),

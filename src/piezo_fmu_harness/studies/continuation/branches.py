@@ -134,7 +134,6 @@ def trace_branch(instance: Instance, problem: dict, settings: dict, seed: dict) 
     backward, why_back = [start], "the branch closed going forward"
     if not why_forward.startswith("closed loop"):
         tracer.map.phase = phase
-        tracer.map._drives.clear()
         backward, why_back = tracer.follow(start, -1.0, lambda p: None)
     points = _records(backward[:0:-1], -1.0) + _records(forward, 1.0)
     ends = [_end(backward, why_back, tracer.gap), _end(forward, why_forward, tracer.gap)]
@@ -172,7 +171,6 @@ def _newton_doubled(tracer: Tracer, point: dict) -> Optional[np.ndarray]:
     lam, x = point["lam"], np.asarray(point["state"], float)
     order = 2 * tracer.order
     tracer.map.phase = point["phase"]
-    tracer.map._drives.clear()
     scale = tracer.S
     h = 1e-6 * max(1.0, float(np.max(np.abs(x * scale))))
     image = tracer.map(x, lam, order=tracer.order)

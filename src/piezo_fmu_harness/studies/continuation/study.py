@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...periodic.band import rest_state, solve_point
+from ...periodic.band import solve_chain
 from ...periodic.steady_state import Settings as SteadySettings
 from .branches import distance_to_branch, trace_branch
 from .tracer import Problem, Settings
@@ -38,15 +38,14 @@ COVERED = 2e-3
 def seed_chain(instance, problem: dict, steady: dict, lams: list, direction: str) -> dict:
     """One sweep of the seeds (a task): the frequency response's shooting at each value of
     ``lams`` in order, each from the previous state, with the parameter value on each record."""
-    problem, steady = Problem(**problem), SteadySettings(**steady)
-    state, phase, records = rest_state(), 0.0, []
-    for k, lam in enumerate(lams):
+    problem = Problem(**problem)
+    points = []
+    for lam in lams:
         omega, amplitude, values = problem.omega_and_amplitude(lam)
-        record = solve_point(instance, k, values, omega, amplitude, steady, state, phase)
+        points.append((values, omega, amplitude))
+    records = solve_chain(instance, points, SteadySettings(**steady))
+    for lam, record in zip(lams, records):
         record.update(lam=lam, direction=direction)
-        records.append(record)
-        if record.get("status") == "ok":
-            state, phase = record["state"], record["phase"]
     return {"direction": direction, "records": records}
 
 

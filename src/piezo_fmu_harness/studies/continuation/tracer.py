@@ -265,7 +265,6 @@ class Tracer:
             return None
         k = int(np.argmax([drive.clearance(s) for s in record]))
         self.map.phase = (self.map.phase + 2.0 * math.pi * ((k + 1) % drive.samples) / drive.samples) % (2 * math.pi)
-        self.map._drives.clear()
         return self.point(self.unknowns(np.array(record[k]), point.lam), 0, None)
 
     # -- following a branch -----------------------------------------------------------------------
