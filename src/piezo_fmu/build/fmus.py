@@ -52,8 +52,9 @@ from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: Files and folders of the package that no FMU needs at run time (each slave travels as its own
-#: module; the loader's sources become the FMUs' linux binary).
-NOT_BUNDLED = frozenset({"fmi/fmi2.py", "fmi/fmi3.py", "build"})
+#: module; the loader's sources become the FMUs' linux binary; the batch engine serves the harness's
+#: studies of many starts, never an FMU).
+NOT_BUNDLED = frozenset({"fmi/fmi2.py", "fmi/fmi3.py", "build", "solver/batch"})
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,148 @@
+"""The two phases of the damper in closed form, for arrays of trajectories (docs/model.md
+sections 2-3).
+
+Relative to a base moving as a ramp (one hold step, :mod:`.drive`), ``u = p - y`` and ``w = q - y``,
+every phase is linear and unforced:
+
+- **Free flight.** ``u'' + 2 a u' + w_n^2 u = 0`` (``a = C / 2M``, ``w_n^2 = K / M``) and ``w'' = 0``:
+  ``u(t) = e^{-a t} [c(t) u0 + s(t) (a u0 + u0')]``, ``u'(t) = e^{-a t} [c(t) u0' - s(t) (w_n^2 u0 + a u0')]``
+  with ``c = cos(w_d t)``, ``s = sin(w_d t) / w_d`` (underdamped; ``cosh`` and ``sinh`` overdamped,
+  the series at critical damping), and ``w = w0 + w0' t``. The impact mass's distance from a
+  barrier, ``g = +-(w - u) - d/2``, has ``|g''| = |u''| <= (w_n + 2a) sqrt(u'^2 + w_n^2 u^2)``, and
+  that root is non-increasing in free flight (``d/dt (u'^2 + w_n^2 u^2) = -4 a u'^2``): a bound that
+  holds from any instant on.
+- **Contact with the barrier on side** ``s`` (+1 right, -1 left). At rest in contact the main spring
+  is unstretched and the barrier undeflected, so the state relative to that rest,
+  ``e = (u, w - s d/2, u', w'[, s V])`` (the patch voltage ``V`` only under ``voltage_model = 2``),
+  obeys ``e' = B e`` with the same ``B`` on both sides: the left barrier is the right one mirrored
+  (:func:`piezo_fmu.model.dynamics.mirror_signs`). ``B`` is diagonalised once,
+  ``B = Q diag(lam) Q^-1`` (balanced first, so that metres, metres per second and volts do not
+  spoil the eigenvectors' conditioning), and ``e(t) = Re(Q (alpha * exp(lam t)))`` with the modal
+  amplitudes ``alpha = Q^-1 e0``. The deflection ``delta = s (e_w - e_u)`` and its rate are sums of
+  modes, and ``|delta''(t)| <= sum_j |g_j alpha_j| |lam_j|^2 exp(Re lam_j t)``, non-increasing too
+  (every mode decays: the contact is passive).
+
+Both bounds make event location rigorous (:mod:`.events`): a step shorter than the bound allows
+cannot jump over a contact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import matrix_balance
+
+from ...model.damper import Damper
+from ...model.dynamics import DU, DW, ONE, RIGHT, U, VOLT, W
+from ...model.parameters import Parameters
+
+#: Condition number of the contact phase's (balanced) eigenvectors beyond which it counts as
+#: defective: the closed form would lose more than about 1e-8 of the state to rounding.
+MAX_CONDITION = 1e8
+
+
+@dataclass(frozen=True, eq=False)
+class FreeFlow:
+    """Free flight of the main mass relative to a ramping base (see the module's text)."""
+
+    a: float      # 1/s, C / 2M
+    w2: float     # 1/s^2, K / M
+    beta2: float  # 1/s^2, a^2 - w_n^2: < 0 underdamped
+
+    @classmethod
+    def of(cls, M: float, K: float, C: float) -> "FreeFlow":
+        a = C / (2.0 * M)
+        return cls(a, K / M, a * a - K / M)
+
+    @property
+    def bound_rate(self) -> float:
+        """``w_n + 2a`` (1/s): ``|u''| <= bound_rate * sqrt(u'^2 + w_n^2 u^2)``."""
+        return math.sqrt(self.w2) + 2.0 * self.a
+
+    def _cs(self, xp, t):
+        beta2 = self.beta2
+        if abs(beta2) <= 1e-12 * self.w2:  # critical damping, to rounding
+            bt2 = beta2 * t * t
+            return 1.0 + bt2 / 2.0, t * (1.0 + bt2 / 6.0)
+        if beta2 < 0.0:
+            wd = math.sqrt(-beta2)
+            return xp.cos(wd * t), xp.sin(wd * t) / wd
+        b = math.sqrt(beta2)
+        return xp.cosh(b * t), xp.sinh(b * t) / b
+
+    def coefficients(self, xp, t) -> tuple:
+        """``(e^{-a t} c(t), e^{-a t} s(t))`` for the times ``t`` (s), to apply with :meth:`apply`."""
+        c, s = self._cs(xp, t)
+        decay = xp.exp(-self.a * t)
+        return decay * c, decay * s
+
+    def apply(self, coefficients: tuple, u, du) -> tuple:
+        """``(u(t), u'(t))`` from ``(u0, u0')`` (m, m/s) with :meth:`coefficients` of ``t``."""
+        ec, es = coefficients
+        a, w2 = self.a, self.w2
+        return ec * u + es * (a * u + du), ec * du - es * (w2 * u + a * du)
+
+
+@dataclass(frozen=True, eq=False)
+class ContactFlow:
+    """Contact with either barrier in modal form (see the module's text); host numpy arrays."""
+
+    lam: np.ndarray      # (n,) complex eigenvalues, 1/s, every real part < 0
+    Q: np.ndarray        # (n, n) complex eigenvectors (columns), physical units
+    Q_inv: np.ndarray    # (n, n) complex
+    gain: np.ndarray     # (n,) complex: delta = s Re(sum_j gain_j alpha_j exp(lam_j t))
+    size: int            # 4, or 5 with the voltage
+
+    @classmethod
+    def of(cls, damper: Damper) -> "ContactFlow":
+        A = damper.matrix(RIGHT)
+        keep = [U, W, DU, DW] + ([VOLT] if damper.coupled else [])
+        B = A[np.ix_(keep, keep)]
+        rest = np.zeros(A.shape[0])
+        rest[W], rest[ONE] = damper.params.d / 2.0, 1.0
+        if np.any(np.abs(A @ rest) > 1e-12 * np.abs(A).max() * rest.sum()):
+            raise AssertionError("contact: the rest state is not u = 0, w = d/2 (the model changed?)")
+        _, (scale, _) = matrix_balance(B, permute=False, separate=True)
+        lam, P = np.linalg.eig((B * scale[None, :]) / scale[:, None])  # T^-1 B T, T = diag(scale)
+        condition = float(np.linalg.cond(P))
+        params = damper.params
+        if not condition < MAX_CONDITION or not np.all(lam.real < 0.0):
+            raise ValueError(f"C_eq = {params.C_eq!r} N.s/m, m = {params.m!r} kg, M = {params.M!r} kg, "
+                             f"C = {params.C!r} N.s/m: the contact phase is defective or not damped (eigenvector "
+                             f"condition {condition:.3g}, eigenvalues {np.round(lam, 6).tolist()}); the batch "
+                             f"engine's closed form needs distinct, decaying modes (allowed: condition below "
+                             f"{MAX_CONDITION:g}); the scalar core and the FMUs take this damper")
+        Q = P * scale[:, None]
+        Q_inv = np.linalg.inv(P) / scale[None, :]
+        row = np.zeros(len(keep))
+        row[0], row[1] = -1.0, 1.0
+        return cls(lam, Q, Q_inv, row @ Q, len(keep))
+
+
+@dataclass(frozen=True, eq=False)
+class BatchModel:
+    """What the batch engine needs of one damper (SI): the two flows and the switch rules'
+    masses (``docs/model.md`` section 3)."""
+
+    params: Parameters
+    free: FreeFlow
+    contact: ContactFlow
+    half_gap: float   # m, d / 2
+    M: float
+    M1: float         # M - M_eq, kg: the main body in contact
+    m: float
+    M_eq: float
+    K: float
+    C: float
+    coupled: bool
+    tau_e: float      # s, R C_p: the decay time of a patch's voltage between contacts
+
+    @classmethod
+    def of(cls, params: Parameters) -> "BatchModel":
+        damper = Damper.of(params)
+        barrier = damper.barrier
+        return cls(params, FreeFlow.of(params.M, params.K, params.C), ContactFlow.of(damper), params.d / 2.0,
+                   params.M, damper.M_contact, params.m, barrier.M_eq, params.K, params.C, damper.coupled,
+                   params.R_load * barrier.C_p)
