@@ -30,7 +30,7 @@ $(TEST_STAMP): $(STAMP)
 # otherwise the one command to run is printed, and make stops.
 system-deps:
 	@missing=""; \
-	ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
+	PATH="$$PATH:/usr/sbin:/sbin" ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
 	command -v cc >/dev/null 2>&1 || missing="$$missing gcc libc6-dev"; \
 	command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1 || missing="$$missing gcc-mingw-w64-x86-64"; \
 	test -x /usr/lib/wine/wine64 || missing="$$missing wine64"; \
