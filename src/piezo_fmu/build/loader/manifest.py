@@ -14,6 +14,10 @@ is the binary these sources give, and the rebuild is byte-identical to the commi
 else is a :class:`LoaderUnavailable` that names what changed and what to install. ``--check``
 reports a manifest that disagrees with the sources or with the FMUs (:func:`problems`).
 
+The compiler itself is not among the inputs (a machine without it cannot name it): that the
+committed binaries are what the compilers give is for ``make fmu-check`` to prove, on a machine
+that has them, as CI has.
+
 The manifest is the build's, not the FMUs': no FMU bundles it.
 """
 
@@ -81,7 +85,7 @@ def disagreement(name: str, recorded: Optional[dict], inputs: dict[str, str], bi
     if changed:
         return f"changed since {MANIFEST.name} was written: {', '.join(changed)}"
     if binary is None:
-        return "the FMU has none"
+        return "it is not there"
     if sha256(binary) != recorded.get("binary"):
         return f"its SHA-256 is {sha256(binary)}, {MANIFEST.name} records {recorded.get('binary')}"
     return None
