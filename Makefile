@@ -1,36 +1,54 @@
 # Two commands set everything up on a fresh machine: `make nominal` and `make test`.
+# `make nominal` needs only python3 with venv and the package registries: no system packages, no
+# root, no compiler (the build reuses the committed loader binaries, see piezo_fmu.build.loader).
+# `make test` also needs the Debian packages of `system-deps`.
 PYTHON ?= python3
-VENV   := .venv
+# The virtual environment; VENV=/some/venv uses (and installs into) another one.
+VENV   ?= .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+PIP    := $(BIN)/python -m pip install -q --disable-pip-version-check
+# The package with what the nominal case and the studies need; then the test extras too.
+STAMP      := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: nominal test docs dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
 
 $(STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install -q -e '.[test]'
-	touch $(STAMP)
+	@echo "installing piezo-fmu into $(VENV) ..."
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	@$(PIP) -e .
+	@touch $@
 
-# Debian packages: libtbb12 (ecospy), a C compiler (the native host), mingw-w64 (the FMUs'
-# Windows binaries, `make fmu`) and Wine (the Windows tests). Installed when missing and we are
-# root; otherwise the command to run is printed.
+$(TEST_STAMP): $(STAMP)
+	@echo "installing piezo-fmu's test extras into $(VENV) ..."
+	@$(PIP) -e '.[test]'
+	@touch $@
+
+# Debian packages for the tests and the developer's targets, not for `make nominal`: libtbb12
+# (ecospy), a C compiler (the native host, the linux loader), mingw-w64 (the FMUs' Windows
+# binaries, `make fmu`) and Wine (the Windows tests). Installed when missing and we are root (CI);
+# otherwise the one command to run is printed, and make stops.
 system-deps:
 	@missing=""; \
-	ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
+	PATH="$$PATH:/usr/sbin:/sbin" ldconfig -p | grep -q "libtbb\.so\.12 " || missing="$$missing libtbb12"; \
 	command -v cc >/dev/null 2>&1 || missing="$$missing gcc libc6-dev"; \
 	command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1 || missing="$$missing gcc-mingw-w64-x86-64"; \
 	test -x /usr/lib/wine/wine64 || missing="$$missing wine64"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
-	  else echo "missing Debian packages:$$missing; install them: sudo apt-get install$$missing" >&2; exit 1; fi; \
+	    echo "installing Debian packages:$$missing ..."; log=$$(mktemp); \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) >$$log 2>&1 \
+	      || { cat $$log >&2; rm -f $$log; exit 1; }; rm -f $$log; \
+	  else echo "missing Debian packages:$$missing (make installs them when run as root); install them with:" >&2; \
+	    echo "  sudo apt-get install$$missing" >&2; exit 1; fi; \
 	fi
 
-# Builds both FMUs from src/ (byte-identical to the committed ones, under a second), then runs
-# the nominal case through the FMI 2.0 FMU with fmpy.
-nominal: system-deps $(STAMP)
-	$(BIN)/python -m piezo_fmu.build
-	$(BIN)/piezo-fmu nominal
+# Builds both FMUs from src/ (byte-identical to the committed ones, under a second; without a
+# compiler, with the committed loader binaries), then runs the nominal case through the FMI 2.0
+# FMU with fmpy. No system package manager: see system-deps for what `make test` adds.
+nominal: $(STAMP)
+	@$(BIN)/python -m piezo_fmu.build
+	@$(BIN)/piezo-fmu nominal
 
 sweep: $(STAMP)
 	$(BIN)/piezo-fmu sweep --preset figs4-9 --force
@@ -44,34 +62,34 @@ load-sweep: $(STAMP)
 frequency-response: $(STAMP)
 	$(BIN)/piezo-fmu frequency-response --force
 
-test: system-deps $(STAMP)
+test: system-deps $(TEST_STAMP)
 	$(BIN)/python -m pytest
 
 # The documentation site (docs/, mkdocs.yml) into build/site, strict: a broken link, a missing
 # reference or any other warning fails the build. NO_MKDOCS_2_WARNING silences the Material theme's
 # banner about its end of life.
-docs: $(STAMP)
+docs: $(TEST_STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --clean --site-dir build/site
 
 # A wheel and an sdist in dist/, checked by twine.
-dist: $(STAMP)
+dist: $(TEST_STAMP)
 	rm -rf dist
 	$(BIN)/python -m build --outdir dist .
 	$(BIN)/python -m twine check --strict dist/*
 
 # The FMU is committed; rebuild it after any change in src/piezo_fmu (byte-reproducible).
 # The cross-check reference is tied to the FMU's bits, so it is rewritten with it.
-fmu: system-deps $(STAMP)
+fmu: system-deps $(TEST_STAMP)
 	$(BIN)/python -m piezo_fmu.build
 	$(BIN)/python crosscheck/run_crosscheck.py --write
 
-crosscheck: system-deps $(STAMP)
+crosscheck: system-deps $(TEST_STAMP)
 	$(BIN)/python crosscheck/run_crosscheck.py all
 
-hosts: system-deps $(STAMP)
+hosts: system-deps $(TEST_STAMP)
 	$(BIN)/python hosts/coupled.py
 
-fmu-check: system-deps $(STAMP)
+fmu-check: system-deps $(TEST_STAMP)
 	$(BIN)/python -m piezo_fmu.build --check
 
 bench: bench-core bench-fmu bench-sweep bench-me bench-forced

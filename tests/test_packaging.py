@@ -93,7 +93,7 @@ def test_the_sdist_carries_what_a_wheel_is_built_from(dist):
     assert {"LICENSE", "README.md", "pyproject.toml", "fmus/PiezoImpactDamper.fmu", "fmus/PiezoImpactDamper3.fmu",
             "src/piezo_fmu/build/loader/loader.c", "src/piezo_fmu/build/loader/platform.h",
             "src/piezo_fmu/build/loader/platform_posix.c", "src/piezo_fmu/build/loader/platform_windows.c",
-            "src/piezo_fmu_harness/fmus.py"} <= names
+            "src/piezo_fmu/build/loader/manifest.json", "src/piezo_fmu_harness/fmus.py"} <= names
 
 
 # -- the wheel in a fresh environment --------------------------------------------------------------

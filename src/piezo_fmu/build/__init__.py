@@ -4,7 +4,8 @@
 - :mod:`.fmus`: the reproducible build of both FMUs (``python -m piezo_fmu.build``);
 - :mod:`.description`: the completion of each modelDescription from the variable table;
 - :mod:`.archive`: the deterministic archive and the patches to pythonfmu's binaries;
-- :mod:`.loader`: the FMUs' own binary, a loader in front of pythonfmu's (C, compiled here).
+- :mod:`.loader`: the FMUs' own binary, a loader in front of pythonfmu's (C, compiled here, or
+  reused from the committed FMUs where its manifest shows the sources give it).
 
 Nothing here is imported by an FMU at run time.
 """

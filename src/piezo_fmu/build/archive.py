@@ -158,10 +158,13 @@ def keep_references_on_exception(binary: bytes) -> bytes:
     return bytes(data)
 
 
+def files_of(data: bytes) -> dict[str, bytes]:
+    """The entries of an FMU archive given as bytes, by name."""
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        return {name: archive.read(name) for name in archive.namelist()}
+
+
 def differences(old: bytes, new: bytes) -> list[str]:
     """Entries that differ between two FMU archives, for a readable staleness report."""
-    def entries(data: bytes) -> dict[str, bytes]:
-        with zipfile.ZipFile(io.BytesIO(data)) as archive:
-            return {name: archive.read(name) for name in archive.namelist()}
-    a, b = entries(old), entries(new)
+    a, b = files_of(old), files_of(new)
     return sorted(name for name in set(a) | set(b) if a.get(name) != b.get(name))

@@ -22,7 +22,11 @@ which is what ``--check`` relies on.
 Each FMU's linux and Windows binaries are the project's loader (:mod:`piezo_fmu.build.loader`,
 compiled here, for Windows with mingw-w64: it finds a Python for a native host and returns Error
 for a refused call); pythonfmu's binaries are kept beside it as
-``<modelIdentifier>.pythonfmu.so`` (mended) and ``<modelIdentifier>.pythonfmu.dll``.
+``<modelIdentifier>.pythonfmu.so`` (mended) and ``<modelIdentifier>.pythonfmu.dll``. Without a
+compiler for a platform (a machine with only ``python3``), the build takes that platform's loader
+from the committed FMU when the loader's manifest shows it is the binary the sources give
+(:mod:`piezo_fmu.build.loader.manifest`); writing the committed FMUs rewrites the manifest, and
+``--check`` also fails when the manifest disagrees with the sources or the FMUs.
 
 Each FMU carries the core (the ``piezo_fmu`` package, less the build, the slaves and the loader's
 sources) and its slave as a top-level module in ``resources/``. At run time it needs a Python 3
@@ -34,6 +38,7 @@ FMU then runs on that copy.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 import tempfile
@@ -46,8 +51,7 @@ from typing import Callable, Optional
 import pythonfmu
 import pythonfmu3
 
-from piezo_fmu.build import archive, description
-from piezo_fmu.build.loader import install_loader
+from piezo_fmu.build import archive, description, loader
 from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -140,7 +144,7 @@ def freeze(raw_fmu: Path, target: Target) -> bytes:
     binary, = [name for name in files if name.startswith(target.linux_binaries) and name.endswith(".so")]
     files[binary] = archive.keep_references_on_exception(archive.drop_exit_unload(files[binary]))
     # the slave's class names the binary: the target's model, or a benchmark's floor
-    files = install_loader(files, target.fmi_version, Path(binary).stem)
+    files = loader.install_loader(files, target.fmi_version, Path(binary).stem, committed=target.dest)
     root = target.complete(files["modelDescription.xml"], target.variables, target.capabilities)
     identity = archive.content_identity(files, description.xml_bytes(root))
     root.set(target.identity, identity)
@@ -181,18 +185,29 @@ def build(target: Target = FMI2, dest: Optional[Path] = None) -> Path:
 
 
 def check(target: Target = FMI2, dest: Optional[Path] = None) -> list[str]:
-    """Problems that make the committed FMU of ``target`` stale (empty when it is up to date)."""
+    """Problems that make the committed FMU of ``target`` stale (empty when it is up to date),
+    the loader's manifest disagreeing with the sources or with the rebuilt FMU included."""
     dest = Path(dest) if dest is not None else target.dest
     if not dest.is_file():
         return [f"{dest} does not exist"]
     old, new = dest.read_bytes(), build_bytes(target)
+    problems = loader.manifest_problems(archive.files_of(new), target.fmi_version)
     if old == new:
-        return []
+        return problems
     try:
         changed = archive.differences(old, new)
     except archive.zipfile.BadZipFile:
-        return [f"{dest} is not a zip archive"]
-    return [f"{dest} differs from a rebuild in: {', '.join(changed) or 'archive layout'}"]
+        return [f"{dest} is not a zip archive", *problems]
+    return [f"{dest} differs from a rebuild in: {', '.join(changed) or 'archive layout'}", *problems]
+
+
+def record_loaders(targets: list[Target]) -> None:
+    """Rewrite the loader's manifest for the loaders in the committed FMUs of ``targets``, just built."""
+    entries = {}
+    for target in targets:
+        entries.update(loader.manifest_entries(archive.files_of(target.dest.read_bytes()), target.fmi_version))
+    if loader.manifest.update(entries):
+        print(f"wrote {os.path.relpath(loader.manifest.MANIFEST)}")
 
 
 def main(argv: Optional[list[str]] = None) -> int:
@@ -206,17 +221,27 @@ def main(argv: Optional[list[str]] = None) -> int:
     targets = [TARGETS[version] for version in (args.fmi or sorted(TARGETS))]
     if args.dest is not None and len(targets) != 1:
         parser.error(f"--dest = {args.dest} needs exactly one --fmi (2 or 3), not {len(targets)}")
+    missing = loader.missing_compilers()
+    if missing:
+        print(f"no compiler here for the {' and '.join(missing)} loaders: reusing the committed FMUs' "
+              f"(checked against {loader.manifest.MANIFEST.name})")
     status = 0
     for target in targets:
-        if args.check:
-            problems = check(target, args.dest)
-            for problem in problems:
-                print(f"stale FMU: {problem}; rebuild it with `make fmu` and commit it", file=sys.stderr)
-            if not problems:
-                print(f"{args.dest or target.dest} is up to date")
-            status = max(status, 1 if problems else 0)
-        else:
-            print(f"wrote {build(target, args.dest)}")
+        try:
+            if args.check:
+                problems = check(target, args.dest)
+                for problem in problems:
+                    print(f"stale FMU: {problem}; rebuild it with `make fmu` and commit it", file=sys.stderr)
+                if not problems:
+                    print(f"{args.dest or target.dest} is up to date")
+                status = max(status, 1 if problems else 0)
+            else:
+                print(f"wrote {build(target, args.dest)}")
+        except loader.manifest.LoaderUnavailable as unavailable:
+            print(f"error: {unavailable}", file=sys.stderr)
+            status = 1
+    if not args.check and args.dest is None and status == 0:
+        record_loaders(targets)
     return status
 
 

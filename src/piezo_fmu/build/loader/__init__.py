@@ -19,6 +19,10 @@ FMI        the loader (what hosts load)                      pythonfmu's binary
 The build is byte-reproducible with the same compilers: it runs in a scratch folder under fixed
 relative file names, with no debug information, no build ID, no PE timestamp
 (``--no-insert-timestamp``), and the result stripped.
+
+Neither compiler is needed to rebuild the committed FMUs: where one is absent,
+:func:`loader_binary` takes that platform's binary from the committed FMU, provided
+:mod:`.manifest` shows that it is the binary the current sources give.
 """
 
 from __future__ import annotations
@@ -29,7 +33,10 @@ import subprocess
 import tempfile
 from functools import lru_cache
 from pathlib import Path
+from typing import Optional
 
+from ..archive import files_of
+from . import manifest
 from .generate import fmi_headers, generate
 
 HERE = Path(__file__).resolve().parent
@@ -69,34 +76,112 @@ def compiler(platform: str = "linux") -> str:
     return cc
 
 
+def _command(fmi_version: int, platform: str, cc: str, scratch: str, headers: str) -> list[str]:
+    """The compiler's command line in ``scratch``, which holds the sources and ``forwarders.inc``."""
+    return [cc, *CFLAGS[platform], f"-DFMI_VERSION={fmi_version}", '-DFORWARDERS="forwarders.inc"',
+            f"-ffile-prefix-map={scratch}=.", "-I", headers,
+            *(name for name in SOURCES[platform] if name.endswith(".c")), "-o", f"loader{LIBRARY_SUFFIX[platform]}",
+            *LIBRARIES[platform]]
+
+
+def _platform_checked(platform: str) -> None:
+    if platform not in SOURCES:
+        raise ValueError(f"platform = {platform!r}; allowed values {PLATFORMS}")
+
+
 @lru_cache(maxsize=None)
 def compile_loader(fmi_version: int, platform: str = "linux") -> bytes:
     """The loader's shared library for FMI ``fmi_version`` (2 or 3) on ``platform`` ("linux" or
     "windows"), compiled here (warnings are errors)."""
-    if platform not in SOURCES:
-        raise ValueError(f"platform = {platform!r}; allowed values {PLATFORMS}")
+    _platform_checked(platform)
     forwarders = generate(fmi_version)
     with tempfile.TemporaryDirectory(prefix="piezo_fmu_loader_") as scratch:
-        scratch = Path(scratch)
         for name in SOURCES[platform]:
-            shutil.copyfile(HERE / name, scratch / name)
-        (scratch / "forwarders.inc").write_text(forwarders)
-        output = f"loader{LIBRARY_SUFFIX[platform]}"
-        command = [compiler(platform), *CFLAGS[platform], f"-DFMI_VERSION={fmi_version}",
-                   '-DFORWARDERS="forwarders.inc"', f"-ffile-prefix-map={scratch}=.", "-I", str(fmi_headers()),
-                   *(name for name in SOURCES[platform] if name.endswith(".c")), "-o", output, *LIBRARIES[platform]]
+            shutil.copyfile(HERE / name, Path(scratch) / name)
+        (Path(scratch) / "forwarders.inc").write_text(forwarders)
+        command = _command(fmi_version, platform, compiler(platform), scratch, str(fmi_headers()))
         completed = subprocess.run(command, cwd=scratch, capture_output=True, text=True)
         if completed.returncode != 0:
             raise RuntimeError(f"compiling the FMI {fmi_version} loader for {platform} failed:\n{completed.stderr}")
-        return (scratch / output).read_bytes()
+        return (Path(scratch) / command[command.index("-o") + 1]).read_bytes()
+
+
+@lru_cache(maxsize=None)
+def loader_inputs(fmi_version: int, platform: str = "linux") -> dict[str, str]:
+    """The SHA-256 of each input of :func:`compile_loader`: the C sources, the generated
+    forwarders, the FMI headers they include, and the compiler's arguments (with the compiler,
+    the scratch folder and the headers' folder left out: they name no content)."""
+    _platform_checked(platform)
+    digests = {name: manifest.sha256((HERE / name).read_bytes()) for name in SOURCES[platform]}
+    digests["forwarders.inc"] = manifest.sha256(generate(fmi_version).encode())
+    headers = sorted(fmi_headers().glob("fmi[23]*.h"))
+    digests["FMI headers"] = manifest.sha256(b"".join(h.name.encode() + b"\0" + h.read_bytes() + b"\0" for h in headers))
+    arguments = _command(fmi_version, platform, "CC", "SCRATCH", "FMI_HEADERS")
+    digests["compiler arguments"] = manifest.sha256("\0".join(arguments).encode())
+    return digests
+
+
+def missing_compilers() -> list[str]:
+    """The platforms whose compiler is not installed here."""
+    missing = []
+    for platform in PLATFORMS:
+        try:
+            compiler(platform)
+        except FileNotFoundError:
+            missing.append(platform)
+    return missing
+
+
+def loaders_in(files: dict[str, bytes], fmi_version: int) -> dict[str, bytes]:
+    """The loader binary of each platform in an FMU's ``files`` (archive names to bytes)."""
+    found = {}
+    for platform in PLATFORMS:
+        folder, suffix = BINARIES[platform, fmi_version] + "/", LIBRARY_SUFFIX[platform]
+        names = [name for name in files if name.startswith(folder) and name.endswith(suffix)
+                 and not name.endswith(REAL_SUFFIXES[platform]) and "/" not in name[len(folder):]]
+        if len(names) == 1:
+            found[platform] = files[names[0]]
+    return found
+
+
+def _committed_loaders(fmu: Path, fmi_version: int) -> dict[str, bytes]:
+    return loaders_in(files_of(Path(fmu).read_bytes()), fmi_version) if Path(fmu).is_file() else {}
+
+
+def loader_binary(fmi_version: int, platform: str = "linux", committed: Optional[Path] = None) -> bytes:
+    """The loader for FMI ``fmi_version`` on ``platform``: compiled where its compiler is installed;
+    elsewhere the one the ``committed`` FMU carries, if :mod:`.manifest` shows that it is the
+    binary these sources give (else :class:`.manifest.LoaderUnavailable`)."""
+    try:
+        compiler(platform)
+    except FileNotFoundError as missing:
+        if committed is None:
+            raise
+        return manifest.committed_binary(fmi_version, platform, loader_inputs(fmi_version, platform),
+                                         _committed_loaders(committed, fmi_version).get(platform), committed, missing)
+    return compile_loader(fmi_version, platform)
+
+
+def manifest_entries(files: dict[str, bytes], fmi_version: int) -> dict:
+    """The manifest's entries for the loaders in an FMU's ``files``, built from these sources."""
+    return {manifest.key(fmi_version, platform): manifest.entry(loader_inputs(fmi_version, platform), binary)
+            for platform, binary in loaders_in(files, fmi_version).items()}
+
+
+def manifest_problems(files: dict[str, bytes], fmi_version: int) -> list[str]:
+    """Where the manifest disagrees with these sources or with the loaders in an FMU's ``files``."""
+    return manifest.problems(fmi_version, loaders_in(files, fmi_version),
+                             {platform: loader_inputs(fmi_version, platform) for platform in PLATFORMS})
 
 
 def install_loader(files: dict[str, bytes], fmi_version: int, model_identifier: str,
-                   platforms: tuple[str, ...] = PLATFORMS) -> dict[str, bytes]:
+                   platforms: tuple[str, ...] = PLATFORMS, committed: Optional[Path] = None) -> dict[str, bytes]:
     """An FMU's files with the loader as its binary of each of ``platforms`` and pythonfmu's
     binary renamed beside it.
 
-    ``files`` maps archive names to bytes, as the FMU build has them; it is not changed.
+    ``files`` maps archive names to bytes, as the FMU build has them; it is not changed. Where a
+    platform's compiler is absent, the loader comes from the ``committed`` FMU (see
+    :func:`loader_binary`).
     """
     if fmi_version not in (2, 3):
         raise ValueError(f"FMI version {fmi_version}: the loader exists for 2 and 3")
@@ -107,5 +192,5 @@ def install_loader(files: dict[str, bytes], fmi_version: int, model_identifier: 
         if binary not in files:
             raise KeyError(f"the FMU has no {binary} (pythonfmu's {platform} binary) to put the loader in front of")
         installed[f"{folder}/{model_identifier}{REAL_SUFFIXES[platform]}"] = installed.pop(binary)
-        installed[binary] = compile_loader(fmi_version, platform)
+        installed[binary] = loader_binary(fmi_version, platform, committed)
     return installed
