@@ -11,13 +11,30 @@ harmonic base motion, with the same physics, in closed form between events:
 - :mod:`.events`: the next switch of each trajectory, located without a step that could jump it;
 - :mod:`.rounds`: a hold step's events, round by round, with the switch rules;
 - :mod:`.ensemble`: :class:`Ensemble`, many trajectories marched period by period;
-- :mod:`.namespace`: numpy on the CPU, or CuPy on a GPU (the array API standard).
+- :mod:`.namespace`: numpy on the CPU, or CuPy on a GPU (the array API standard);
+- :mod:`.orbits`: Newton, verification and multipliers on the engine, the motion without impacts;
+- :mod:`.settle`: where each of many starts goes, by marching (the rule of issue 26).
 
 It is not part of the FMUs; the FMU stays the reference that the studies check it against.
 """
 
+import dataclasses
+
+from ...model.parameters import Parameters
 from .drive import HarmonicHold
 from .ensemble import Ensemble
-from .namespace import DEVICES, namespace, to_numpy
+from .namespace import DEVICES, device_error, namespace, to_numpy
+from .settle import SettleSettings, Settled, describe, settle, tracks
 
-__all__ = ["DEVICES", "Ensemble", "HarmonicHold", "namespace", "to_numpy"]
+
+def damper(values: dict) -> Parameters:
+    """The damper of the FMU parameter values ``values`` (SI, by the FMU's names, which are the
+    :class:`~piezo_fmu.model.parameters.Parameters` fields; the initial state is not used: the
+    ensemble's starts are)."""
+    names = {f.name for f in dataclasses.fields(Parameters)}
+    return Parameters(**{k: v for k, v in values.items() if k in names and k not in ("p0", "q0", "dp0", "dq0")},
+                      p0=0.0, q0=0.0, dp0=0.0, dq0=0.0)
+
+
+__all__ = ["DEVICES", "Ensemble", "device_error", "HarmonicHold", "SettleSettings", "Settled", "damper", "describe", "namespace",
+           "settle", "to_numpy", "tracks"]

@@ -1,0 +1,378 @@
+"""Where each start goes: many starts marched on the batch engine to the motion they reach.
+
+**The rule.** The motion reported for a start is the one its trajectory reaches. A stable orbit
+found by Newton is not enough: Newton converges to whatever orbit lies near, and a trajectory can
+pass close to one stable orbit on its way to another (issue 26). So the starts are marched, a
+block of periods at a time, and a start is labelled only when its own trajectory shows where it
+goes:
+
+- **an orbit with impacts**: its sections, over the last blocks, come within a small distance
+  (``LINEAR_REACH`` of the orbit's size) of a known stable orbit, make the orbit's contact onsets
+  in every period (the same impact sequence), and their distance to it shrinks at least as fast as
+  its largest multiplier predicts (``RATE_SLACK``), or is already within the tolerance. The orbits
+  are found by Newton (:mod:`.orbits`) from trajectories whose returns are shrinking, verified,
+  and kept only when their multipliers lie inside the unit circle; Newton only accelerates what
+  marching shows: it never labels a start by itself.
+- **the motion without impacts**: the trajectory is free with its impact mass at rest and provably
+  never reaches a barrier again (:func:`.orbits.free_for_ever`): it ends on the family of orbits
+  without impacts, whatever the slowly decaying transient (about 100 periods an e-fold at
+  ``zeta = 0.0016``) still does.
+- **a motion that is not periodic**: no label within ``max_cycles``. Its largest Lyapunov exponent
+  (a companion trajectory ``1e-8`` away, renormalised every period) and the modulation of its
+  amplitude are measured over ``classify_cycles`` more periods, for the caller to classify.
+
+Everything runs on arrays of trajectories; the resolved ones leave the ensemble after each block.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .drive import HarmonicHold
+from .ensemble import Ensemble
+from .namespace import to_numpy
+from .orbits import LinearOrbit, Orbit, OrbitFinder, free_for_ever, linear_orbit, scale_of
+from .phases import BatchModel
+
+#: A trajectory is taken to be on its way to an orbit within this fraction of the orbit's size.
+LINEAR_REACH = 0.05
+#: How much slower than its largest multiplier's modulus (per period) the distance may shrink.
+RATE_SLACK = 0.02
+#: Returns of a seed for Newton: within this fraction of the size, and shrinking.
+SEED_REACH = 0.1
+#: The companion of the Lyapunov exponent, relative to the state's size.
+COMPANION = 1e-8
+
+
+@dataclass(frozen=True)
+class SettleSettings:
+    """How far and how the starts are marched.
+
+    Attributes
+    ----------
+    tolerance : float
+        Steady-state tolerance, relative to each drive's ``Y``.
+    max_cycles : int
+        Periods a start is marched at most before it counts as not periodic.
+    block : int
+        Periods between two looks at the trajectories.
+    max_order : int
+        Longest orbit looked for, in forcing periods.
+    classify_cycles : int
+        Periods over which a motion that is not periodic is measured.
+    seeds : int
+        Newton seeds tried per drive and block, at most.
+    """
+
+    tolerance: float = 1e-6
+    max_cycles: int = 1000
+    block: int = 20
+    max_order: int = 4
+    classify_cycles: int = 40
+    seeds: int = 4
+
+
+@dataclass
+class Quiet:
+    """The motion without impacts of one drive: the family of orbits where the impact mass rests."""
+
+    group: int
+    orbit: LinearOrbit
+
+
+@dataclass
+class Settled:
+    """Where each start went (host arrays over the starts).
+
+    ``labels``: index into ``attractors`` (an :class:`~.orbits.Orbit` or a :class:`Quiet`), -1 for
+    a motion that is not periodic, -2 for a trajectory the engine set aside; ``periods``: periods
+    marched when the label was given (``max_cycles`` for the others); for the motions that are not
+    periodic: ``exponent`` (1/period), ``modulation``, ``impacts_per_cycle``, ``amplitude``,
+    ``amplitude_min``, ``amplitude_max`` (m), NaN elsewhere; ``unstable``: orbits Newton found
+    that are not stable (never a label); ``cycles``: start-periods marched in all.
+    """
+
+    labels: np.ndarray
+    periods: np.ndarray
+    attractors: list
+    unstable: list
+    measures: dict
+    cycles: int = 0
+
+    def records(self) -> tuple[list[dict], list[dict]]:
+        """JSON-safe: one record per start (``label``, ``periods`` and, for a motion that is not
+        periodic, its measures) and one per attractor (:func:`describe`)."""
+        starts = []
+        for j, label in enumerate(self.labels.tolist()):
+            record = {"label": int(label), "periods": int(self.periods[j])}
+            if label == -1:
+                record.update({name: _finite(values[j]) for name, values in self.measures.items()})
+            starts.append(record)
+        return starts, [describe(a) for a in self.attractors]
+
+
+def describe(attractor) -> dict:
+    """A JSON-safe description of an attractor of :func:`settle` (SI): ``kind`` ("orbit" or "no
+    impacts"), its drive's ``group``, the amplitude (m) as the harness measures it, and for an
+    orbit its order, contact onsets per period, section states and sides, and multipliers."""
+    if isinstance(attractor, Quiet):
+        orbit = attractor.orbit
+        return {"kind": "no impacts", "group": attractor.group, "order": 1, "impacts": [0],
+                "impacts_per_cycle": 0.0, "amplitude": orbit.amplitude, "top": orbit.top, "bottom": orbit.bottom,
+                "sections": [[float(v) for v in orbit.nodes[0]] + [None, 0.0]], "sides": [0],
+                "max_multiplier": orbit.multiplier, "multipliers": [], "multiplier_error": 0.0}
+    return {"kind": "orbit", "group": attractor.group, "order": attractor.order, "impacts": list(attractor.impacts),
+            "impacts_per_cycle": attractor.impacts_per_cycle, "amplitude": attractor.amplitude,
+            "top": attractor.top, "bottom": attractor.bottom,
+            "sections": [[float(v) for v in row] for row in attractor.sections],
+            "sides": [int(s) for s in attractor.sides], "max_multiplier": attractor.largest,
+            "multipliers": [[mu.real, mu.imag] for mu in attractor.multipliers],
+            "multiplier_error": attractor.error}
+
+
+def _finite(value) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
+           device: str = "cpu", progress=None) -> Settled:
+    """March ``starts`` ((n, 4): ``p, p', q, q'``, free) under ``drives`` (one, or one per group)
+    to where each goes (see the module's text). ``progress(done, total)`` is called after each block."""
+    drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
+    starts = np.asarray(starts, float)
+    n = len(starts)
+    groups = np.zeros(n, int) if groups is None else np.asarray(groups, int)
+    model = BatchModel.of(params)
+    tolerance = np.array([settings.tolerance * max(d.amplitude, 1e-300) for d in drives])
+    finder = OrbitFinder(model, drives, tolerance, device)
+    linear = [linear_orbit(model, d) for d in drives]
+    scales = np.array([scale_of(d) for d in drives])
+    state = _State(n, settings)
+    quiet: dict[int, int] = {}
+    ens = Ensemble(params, drives, starts, groups, device=device, model=model)
+    ids = np.arange(n)
+    # A start may already be free for ever.
+    _label_quiet(state, model, linear, quiet, ids, groups, starts, np.zeros(n), 0)
+    keep = state.labels[ids] == -1
+    ens, ids = (ens.select(keep), ids[keep]) if not keep.all() else (ens, ids)
+    history = None
+    marched = 0
+    while len(ids) and marched < settings.max_cycles:
+        periods = min(settings.block, settings.max_cycles - marched)
+        record = ens.advance(periods)
+        finder.cycles += periods * len(ids)
+        marched += periods
+        history = _extend(history, record, 2 * settings.block + settings.max_order)
+        g = groups[ids]
+        failed = to_numpy(ens.failed).astype(bool)
+        state.labels[ids[failed]] = -2
+        state.periods[ids[failed]] = marched
+        _label_quiet(state, model, linear, quiet, ids, g, record["sections"][-1], record["sides"][-1], marched)
+        _find_orbits(state, finder, history, ids, g, scales, settings)
+        _label_orbits(state, history, ids, g, scales, tolerance, marched)
+        keep = state.labels[ids] == -1
+        if not keep.all():
+            ens, ids = ens.select(keep), ids[keep]
+            history = {name: values[:, keep] for name, values in history.items()}
+        if progress is not None:
+            progress(n - len(ids), n)
+    state.periods[ids] = marched
+    measures = _measure(ens, ids, n, scales, settings, finder) if len(ids) else _empty(n)
+    return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles)
+
+
+class _State:
+    def __init__(self, n: int, settings: SettleSettings):
+        self.labels = np.full(n, -1)
+        self.periods = np.zeros(n, dtype=np.int64)
+        self.attractors: list = []
+        self.unstable: list = []
+        self.settings = settings
+
+
+def tracks(params, drives, starts, groups, periods, device: str = "cpu") -> list[list[list[float]]]:
+    """The section states of each start (``(n, 4)``, free) over its first ``periods[j]`` periods,
+    JSON-safe: what a check through the FMU compares its own trajectory with."""
+    drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
+    periods = [int(k) for k in periods]
+    if not periods:
+        return []
+    ens = Ensemble(params, drives, np.asarray(starts, float), np.asarray(groups, int), device=device)
+    sections = ens.advance(max(max(periods), 1))["sections"]
+    return [[[float(v) for v in row] for row in sections[:k, j]] for j, k in enumerate(periods)]
+
+
+def _extend(history, record, keep: int) -> dict:
+    fresh = {name: record[name] for name in ("sections", "sides", "impacts")}
+    if history is None:
+        return fresh
+    return {name: np.concatenate([history[name], fresh[name]])[-keep:] for name in fresh}
+
+
+def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marched) -> None:
+    for g in np.unique(groups):
+        mask = (groups == g) & (state.labels[ids] == -1)
+        if not mask.any():
+            continue
+        calm = free_for_ever(model, linear[g], sections[mask], sides[mask])
+        if calm.any():
+            if g not in quiet:
+                quiet[g] = len(state.attractors)
+                state.attractors.append(Quiet(int(g), linear[g]))
+            chosen = ids[mask][calm]
+            state.labels[chosen] = quiet[g]
+            state.periods[chosen] = marched
+
+
+def _distances(history, scale, orbit: Orbit) -> tuple[np.ndarray, np.ndarray]:
+    """Scaled distance of each section (periods, m) to the nearest point of ``orbit``, and that
+    point's index."""
+    points = orbit.sections * scale
+    gaps = np.abs(history["sections"][:, :, None, :] * scale - points[None, None]).max(axis=3)
+    return gaps.min(axis=2), gaps.argmin(axis=2)
+
+
+def _label_orbits(state, history, ids, groups, scales, tolerance, marched) -> None:
+    """Label the trajectories that are on their way to a known stable orbit (the rule)."""
+    span = history["sections"].shape[0]
+    for index, orbit in enumerate(state.attractors):
+        if not isinstance(orbit, Orbit):
+            continue
+        mask = (groups == orbit.group) & (state.labels[ids] == -1)
+        if not mask.any() or span < 2 * orbit.order:
+            continue
+        scale = scales[orbit.group]
+        sub = {name: values[:, mask] for name, values in history.items()}
+        d, nearest = _distances(sub, scale, orbit)
+        # the period that ends at the orbit's point i is the orbit's period i - 1
+        pattern = np.array(orbit.impacts)
+        same_sequence = (sub["impacts"] == pattern[(nearest - 1) % orbit.order]).all(axis=0) & (sub["sides"] == orbit.sides[nearest]).all(axis=0)
+        size = max(float(np.abs(orbit.sections * scale).max()), tolerance[orbit.group] / state.settings.tolerance)
+        first, last = d[0], d[-1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = (last / first) ** (1.0 / (span - 1))
+        shrinking = (last < first) & (rate <= orbit.largest + RATE_SLACK) & (last <= LINEAR_REACH * size)
+        on = same_sequence & ((last <= tolerance[orbit.group]) | shrinking)
+        chosen = ids[mask][on]
+        state.labels[chosen] = index
+        state.periods[chosen] = marched
+
+
+def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
+    """Newton from the trajectories whose returns shrink, for orbits not known yet."""
+    sections, impacts, sides = history["sections"], history["impacts"], history["sides"]
+    span = sections.shape[0]
+    open_ = state.labels[ids] == -1
+    chosen: dict[int, list] = {}
+    for order in range(1, settings.max_order + 1):
+        if span < 3 * order + 2:
+            break
+        scale = scales[groups]
+        returns = np.abs((sections[order:] - sections[:-order]) * scale[None]).max(axis=2)
+        periodic = (impacts[order:] == impacts[:-order]).all(axis=0) & (sides[order:] == sides[:-order]).all(axis=0)
+        size = np.abs(sections[-1] * scale).max(axis=1)
+        converging = open_ & periodic & (returns[-1] < 0.5 * returns[0]) & (returns[-1] <= SEED_REACH * size)
+        for j in np.flatnonzero(converging):
+            if any(j in seeds for seeds in chosen.values()):
+                continue
+            chosen.setdefault(order, []).append(j)
+    for order, seeds in chosen.items():
+        seeds = _spread(seeds, groups, sections[-1], scales, state, settings.seeds)
+        if not seeds:
+            continue
+        seeds = np.array(seeds)
+        x, converged = finder.newton(sections[-1][seeds], sides[-1][seeds], groups[seeds], order)
+        if not converged.any():
+            continue
+        found = finder.verify(x[converged], sides[-1][seeds][converged], groups[seeds][converged], order)
+        fresh: list = []
+        for orbit in found:
+            if orbit is not None and not _known(state.attractors + state.unstable + fresh, orbit, scales,
+                                                finder.tolerance):
+                fresh.append(orbit)
+        if not fresh:
+            continue
+        finder.multipliers(fresh)
+        for orbit in fresh:
+            (state.attractors if orbit.stable else state.unstable).append(orbit)
+
+
+def _spread(seeds, groups, last, scales, state, most: int) -> list:
+    """At most ``most`` seeds per drive, none near a known orbit or another seed."""
+    picked: list = []
+    for j in seeds:
+        g = groups[j]
+        if sum(groups[k] == g for k in picked) >= most:
+            continue
+        scale = scales[g]
+        near_known = any(o.group == g and np.abs((o.sections - last[j]) * scale).max(axis=1).min()
+                         <= LINEAR_REACH * max(np.abs(o.sections * scale).max(), 1e-300)
+                         for o in state.attractors + state.unstable if isinstance(o, Orbit))
+        near_seed = any(groups[k] == g and np.abs((last[k] - last[j]) * scale).max()
+                        <= LINEAR_REACH * np.abs(last[j] * scale).max() for k in picked)
+        if not near_known and not near_seed:
+            picked.append(j)
+    return picked
+
+
+def _known(orbits: list, orbit: Orbit, scales, tolerance) -> bool:
+    """``orbit`` passes within 100 tolerances of one of ``orbits``: the same orbit."""
+    scale = scales[orbit.group]
+    for other in orbits:
+        if isinstance(other, Orbit) and other.group == orbit.group:
+            if np.abs((other.sections - orbit.sections[0]) * scale).max(axis=1).min() <= 100 * tolerance[orbit.group]:
+                return True
+    return False
+
+
+def _empty(n: int) -> dict:
+    return {name: np.full(n, np.nan) for name in ("exponent", "modulation", "impacts_per_cycle", "amplitude",
+                                                  "amplitude_min", "amplitude_max")}
+
+
+def _measure(ens: Ensemble, ids, n, scales, settings, finder) -> dict:
+    """Lyapunov exponent, modulation, impacts and amplitudes of the trajectories left: each is
+    marched beside a companion ``COMPANION`` of its size away, brought back to that distance
+    (along the same direction) after every period."""
+    measures = _empty(n)
+    m = len(ids)
+    states, sides, groups, volts = ens.states, ens.sides, ens.group, ens.voltages
+    direction = np.random.default_rng(0).standard_normal(4)
+    direction /= np.linalg.norm(direction)
+    scale = scales[groups]
+    delta = COMPANION * np.maximum(np.abs(states * scale).max(axis=1), 1e-300)
+    pair = Ensemble(ens.params, ens.drives, np.concatenate([states, states]), np.concatenate([groups, groups]),
+                    np.concatenate([sides, sides]), None if volts is None else np.concatenate([volts, volts], axis=1),
+                    ens.device, ens.model)
+    companions = np.arange(2 * m) >= m
+    logs = np.zeros(m)
+    tops, bottoms, counts = [], [], []
+    offset = direction[None] * delta[:, None] / scale
+    for _ in range(settings.classify_cycles):
+        pair.assign(companions, states + offset, sides, volts)
+        out = pair.advance(1, observe=True)
+        finder.cycles += 2 * m
+        now = pair.states
+        states, other = now[:m], now[m:]
+        sides, volts = pair.sides[:m], None if volts is None else pair.voltages[:, :m]
+        gap = np.linalg.norm((other - states) * scale, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logs += np.log(gap / delta)
+            offset = (other - states) * (delta / gap)[:, None]
+        tops.append(out["top"][0, :m])
+        bottoms.append(out["bottom"][0, :m])
+        counts.append(out["impacts"][0, :m])
+    swings = 0.5 * (np.array(tops) - np.array(bottoms))
+    largest = swings.max(axis=0)
+    measures["exponent"][ids] = logs / settings.classify_cycles
+    with np.errstate(divide="ignore", invalid="ignore"):
+        measures["modulation"][ids] = np.where(largest > 0, (largest - swings.min(axis=0)) / largest, 0.0)
+    measures["impacts_per_cycle"][ids] = np.array(counts).mean(axis=0)
+    measures["amplitude"][ids] = 0.5 * (np.array(tops).max(axis=0) - np.array(bottoms).min(axis=0))
+    measures["amplitude_min"][ids] = swings.min(axis=0)
+    measures["amplitude_max"][ids] = largest
+    return measures
