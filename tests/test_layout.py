@@ -1,7 +1,9 @@
 """The shape of the code: the physics apart from the numerics, and both apart from FMI.
 
 - Imports run one way: ``piezo_fmu.build`` may import the FMI layer, ``piezo_fmu.fmi`` the solver and
-  the model, the solver the model, and the model neither; the harness never imports the core at all.
+  the model, the solver the model, and the model neither; the harness never imports the core, but
+  for the studies of many starts (basins, fractions, the bifurcation diagram), which import the
+  batch engine ``piezo_fmu.solver.batch`` and nothing else of it (issue 27).
 - ``piezo_fmu.fmi`` holds only what ships inside the FMUs (issue 22): every module there is a slave
   script or lies under the FMUs' ``resources/``, and what builds the FMUs is in ``piezo_fmu.build``.
 - No import cycle between modules, inside the package or the harness (lazy imports in functions
@@ -75,10 +77,26 @@ def test_imports_run_one_way_fmi_then_solver_then_model(path):
     assert not upward, f"{path.name} ({module_name(path)}) imports from a layer above it: {upward}"
 
 
-def test_the_harness_never_imports_the_core():
+#: The studies of many starts march them on the core's batch engine (issue 27); nothing else of the
+#: harness reads the core, and they read nothing of it but the batch engine.
+BATCH_STUDIES = ("piezo_fmu_harness.studies.basins", "piezo_fmu_harness.studies.fractions")
+BATCH_ENGINE = "piezo_fmu.solver.batch"
+
+
+def test_the_harness_never_imports_the_core_but_the_batch_studies_the_batch_engine():
     for path in sources(HARNESS):
+        name = module_name(path)
         core = sorted(m for m in imports(path) if m.split(".")[0] == "piezo_fmu")
+        if name.startswith(BATCH_STUDIES):
+            core = [m for m in core if not (m == BATCH_ENGINE or m.startswith(BATCH_ENGINE + "."))]
         assert not core, f"{path} imports {core}"
+
+
+def test_the_batch_studies_say_that_they_read_the_batch_engine():
+    for study in BATCH_STUDIES:
+        path = HARNESS / "studies" / study.rpartition(".")[2] / "study.py"
+        text = " ".join(path.read_text().split())
+        assert "reads the simulation core's batch engine" in text, path
 
 
 @pytest.mark.parametrize("folder", [PACKAGE, HARNESS], ids=["piezo_fmu", "piezo_fmu_harness"])

@@ -90,3 +90,19 @@ def time_series(sub, name: str) -> None:
 
     common(sub, NOMINAL_STEP, "the time series' sampling")
     results_folder(sub, name)
+
+
+def many_start_options(sub, max_cycles: int, confirm: int, confirm_where: str) -> None:
+    """The options of a study of many starts on the batch engine."""
+    for option, kind, metavar, text in (
+            ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p))"),
+            ("--voltage-model", int, "N", "0, 1 or 2 (default 1)"),
+            ("--samples", int, "N", "communication steps per forcing period (default 64)"),
+            ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
+            ("--max-cycles", int, "N", f"forcing periods a start is marched at most (default {max_cycles})"),
+            ("--confirm", int, "N", f"starts checked through the FMU besides one per attractor, {confirm_where} "
+                                    f"(default {confirm})"),
+            ("--seed", int, "S", "seed of the random starts and of the FMU's sample (default 0)")):
+        sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    sub.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                     help="where the batch engine runs: numpy on the CPU, or CuPy on a GPU (default cpu)")

@@ -56,9 +56,10 @@ from piezo_fmu.fmi.variables import FMI3_VARIABLES, VARIABLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: Files and folders of the package that no FMU needs at run time (each slave travels as its own
-#: module; the loader's sources become the FMUs' linux binary; the batch engine serves the harness's
-#: studies of many starts, never an FMU).
-NOT_BUNDLED = frozenset({"fmi/fmi2.py", "fmi/fmi3.py", "build", "solver/batch"})
+#: module; the loader's sources become the FMUs' linux binary). The batch engine (``solver/batch``)
+#: travels although no FMU runs it: a process imports ``piezo_fmu`` once, from the first FMU it
+#: loads, and a study of many starts must find the engine in that copy too.
+NOT_BUNDLED = frozenset({"fmi/fmi2.py", "fmi/fmi3.py", "build"})
 
 
 @dataclass(frozen=True)

@@ -57,16 +57,19 @@ def classify(drive: HarmonicDrive, periods: int = 40) -> dict:
         drive.release(saved)
     swings = period_swings(np.array([first] + record), drive)
     modulation = (max(swings) - min(swings)) / max(swings) if max(swings) > 0 else 0.0
-    if counted == 0:
-        motion = "unclassified"
-    elif exponent > CHAOS:
-        motion = "chaotic"
-    elif exponent < TRANSIENT:
-        motion = "transient"
-    else:
-        motion = "strongly modulated" if modulation > STRONG else "quasi-periodic"
+    motion = kind(exponent, modulation) if counted else "unclassified"
     return {"motion": motion, "lyapunov_exponent": exponent if counted else None, "lyapunov_periods": counted,
             "modulation": float(modulation), "sections": [[float(v) for v in s] for s in sections]}
+
+
+def kind(exponent: float, modulation: float) -> str:
+    """The class of a motion that is not periodic, from its largest Lyapunov exponent (per period)
+    and its modulation (see the module's text)."""
+    if exponent > CHAOS:
+        return "chaotic"
+    if exponent < TRANSIENT:
+        return "transient"
+    return "strongly modulated" if modulation > STRONG else "quasi-periodic"
 
 
 def _lyapunov(drive: HarmonicDrive, sections: list) -> tuple[float, int]:

@@ -1,7 +1,8 @@
-"""Basins of attraction (issue 23): a grid of starts at one frequency, each marched to the motion it
-ends on, and the share of the starts each motion takes (``piezo-fmu basins --ratio R``).
+"""Basins of attraction (issues 23, 26, 27): a grid of starts at one frequency, each marched to the
+motion it reaches, and the share of the starts each motion takes (``piezo-fmu basins --ratio R``).
 
-- :mod:`.study`: the starts on the engine, the attractors, the files;
+- :mod:`.study`: the starts on the batch engine, in chunks on the sweep engine, the attractors,
+  the FMU's checks, the files;
 - :mod:`.figure`: the map.
 """
 
@@ -10,29 +11,29 @@ from __future__ import annotations
 
 def register(commands) -> None:
     """``piezo-fmu basins``."""
-    from ...options import engine, model_options, results_folder
+    from ...options import engine, many_start_options, model_options, results_folder
+    from . import study
 
     basins = commands.add_parser(
-        "basins", help="basins of attraction at one frequency: which motion each start ends on, and their shares",
+        "basins", help="basins of attraction at one frequency: which motion each start reaches, and their shares",
         description="At w = R sqrt(K/M), start the damper from a grid of p0 against p0' (the impact mass at rest in "
-                    "the middle of the gap), find the steady state each start ends on (a stable orbit, or a motion "
-                    "that is not periodic, classified), and report the share of the starts each attractor takes. "
-                    "Writes basins.nc/.csv, summary.json and basins.png; every start is appended to points.jsonl "
-                    "(--resume).")
+                    "the middle of the gap) and march every start, on the batch engine, until its own trajectory "
+                    "shows where it goes (a stable orbit it converges to with that orbit's impacts, the motion "
+                    "without impacts once it can never impact again, or, after --max-cycles, a motion that is not "
+                    "periodic, classified); report each attractor's share with its 95%% interval and the "
+                    "uncertainty of the basin boundary. The FMU checks one start of every attractor and --confirm "
+                    "more. Writes basins.nc/.csv, summary.json and basins.png; chunks of starts are appended to "
+                    "points.jsonl (--resume).")
     basins.add_argument("--ratio", type=float, required=True, metavar="R", help="the frequency, as w / sqrt(K/M)")
+    basins.add_argument("--grid", type=int, default=None, metavar="N",
+                        help=f"N x N starts over the default ranges (default {study.DEFAULT_COUNT}; 201 for print)")
     basins.add_argument("--p0", default=None, metavar="LO:HI:N",
-                        help="initial displacements of the main mass, m (default -2 to 2 linear amplitudes, 15)")
+                        help="initial displacements of the main mass, m (default -2 to 2 linear amplitudes)")
     basins.add_argument("--dp0", default=None, metavar="LO:HI:N",
-                        help="initial velocities of the main mass, m/s (default -2 to 2 linear amplitudes times w, 15)")
+                        help="initial velocities of the main mass, m/s (default -2 to 2 linear amplitudes times w)")
     basins.add_argument("--amplitude", type=float, default=None, metavar="M", help="base displacement amplitude Y, m "
                                                                                     "(default 1e-3)")
-    for option, kind, metavar, text in (
-            ("--load", float, "OHM", "load R_load of each patch, Ohm (default 1/(omega_c C_p))"),
-            ("--voltage-model", int, "N", "0, 1 or 2 (default 1)"),
-            ("--samples", int, "N", "communication steps per forcing period (default 64)"),
-            ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
-            ("--max-cycles", int, "N", "cap on the forcing cycles simulated per start (default 400)")):
-        basins.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    many_start_options(basins, study.DEFAULT_MAX_CYCLES, study.DEFAULT_CONFIRM, "in all")
     model_options(basins)
     results_folder(basins, "basins")
     engine(basins)
@@ -57,52 +58,71 @@ def grid_option(text, option: str, default: tuple, unit: str) -> tuple:
 
 
 def command(args) -> int:
-    import json
     import shutil
-    import sys
+    import time
 
-    from ...checks import PROG, make_backend, open_model, positive, preflight, worker_count
-    from ...engine import InProcess
+    from ...checks import PROG, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec, linear_transmissibility
+    from ...periodic.many import backend_for, confirm, execute
     from . import study
 
     model = open_model(args)
     ratio = positive(args.ratio, "--ratio", "the frequency ratio w / sqrt(K/M)", "")
+    count = whole(study.DEFAULT_COUNT if args.grid is None else args.grid, "--grid", 2,
+                  "a grid needs at least 2 x 2 starts")
+    confirm_count = whole(study.DEFAULT_CONFIRM if args.confirm is None else args.confirm, "--confirm", 0,
+                          "the FMU's checks cannot be negative")
+    seed = whole(0 if args.seed is None else args.seed, "--seed", 0, "the seed is a whole number >= 0")
     jobs = worker_count(args)
     unzipdir, instance = preflight(model, [{}], "--fmu")
     try:
         args.ratio_min = args.ratio_max = ratio
         args.count, args.acceleration, args.newton_iterations = 1, None, None
-        band = frequency_spec(args, model, instance, {"ratios": (ratio, ratio), "count": 1, "max_cycles": 400, "fewest": 1})
+        band = frequency_spec(args, model, instance, {"ratios": (ratio, ratio), "count": 1,
+                                                      "max_cycles": study.DEFAULT_MAX_CYCLES, "fewest": 1})
         parameters = {**model.defaults(), **band.values}
         omega, amplitude = float(band.omegas[0]), float(band.amplitude)
         linear = amplitude * float(linear_transmissibility(omega, parameters["M"], parameters["K"], parameters["C"]))
         span = study.DEFAULT_SPAN * linear
-        p0 = grid_option(args.p0, "--p0", (-span, span, study.DEFAULT_COUNT), "m")
-        dp0 = grid_option(args.dp0, "--dp0", (-span * omega, span * omega, study.DEFAULT_COUNT), "m/s")
-        spec = study.BasinSpec(ratio, omega, amplitude, band.values, p0, dp0, band.settings)
+        p0 = grid_option(args.p0, "--p0", (-span, span, count), "m")
+        dp0 = grid_option(args.dp0, "--dp0", (-span * omega, span * omega, count), "m/s")
+        settings = band.settings
+        spec = study.BasinSpec(ratio, omega, amplitude, {**parameters, **band.values}, p0, dp0, settings.samples,
+                               settings.tolerance, settings.max_cycles, args.device, confirm_count, seed)
+        _check_device(args.device)
         folder, done, start_over = study.open_basins(model, spec, args.out, args.resume, args.force)
-        header = json.dumps({**spec.to_dict(), "fmu_guid": model.guid}, indent=2) + "\n"
-        remaining = len(spec.grid()) - len(done)
-        if remaining:
-            backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
-                       else make_backend(args, model, unzipdir, jobs))
-            print(f"{PROG} basins: {remaining} of {len(spec.grid())} starts to run on {backend.description}",
-                  file=sys.stderr)
-            try:
-                study.execute(spec, folder, done, start_over, header, backend)
-            except KeyboardInterrupt:
-                print(f"\n{PROG} basins: interrupted; {len(done)} starts are saved; run the same command with --resume",
-                      file=sys.stderr)
+        backend = backend_for(args, model, unzipdir, instance, jobs)
+        begin = time.perf_counter()
+        try:
+            if not execute("basins", study.tasks(spec), folder, done, start_over, study.HEADER_FILE,
+                           {**spec.to_dict(), "fmu_guid": model.guid}, backend, spec.shape[0] * spec.shape[1],
+                           False if args.no_progress else None, args.device):
                 return 130
-            finally:
-                backend.close()
+            found, starts = study.outcome(spec, done)
+            checks = confirm(backend, [(study.payloads(spec, found, starts), starts, spec.confirm, spec.seed)])
+        finally:
+            backend.close()
     finally:
         instance.free()
         shutil.rmtree(unzipdir, ignore_errors=True)
-    report = study.write(spec, done, folder)
+    report = study.write(spec, found, starts, checks, folder, time.perf_counter() - begin)
     print(f"{PROG} basins at w/w_n = {ratio:g}: {report['starts']} starts")
     for attractor in report["attractors"]:
-        print(f"  {100 * attractor['share']:5.1f}%  {attractor['name']}")
+        print(f"  {100 * attractor['share']:5.1f}% ({100 * attractor['share_low']:.1f}-"
+              f"{100 * attractor['share_high']:.1f}%)  {attractor['name']}")
+    edge = report["boundary"]
+    print(f"  boundary: {100 * edge['boundary_fraction']:.1f}% of the cells; basin entropy {edge['basin_entropy']:.3f}, "
+          f"on the boundary {edge['boundary_basin_entropy']:.3f}")
+    checks = report["fmu_checks"]
+    print(f"  the FMU, marched from {checks['checked']} of the starts: agrees on {checks['agree']}, parted from the "
+          f"batch engine in a chaotic transient on {checks['parted']}, disagrees on {checks['disagree']}")
     print(f"  results in {folder}")
     return 0
+
+
+def _check_device(device: str) -> None:
+    from piezo_fmu.solver.batch import device_error
+    message = device_error(device)
+    if message:
+        from ...spec import UsageError
+        raise UsageError(f"--device {device}: {message}")

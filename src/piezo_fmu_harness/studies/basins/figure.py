@@ -17,7 +17,8 @@ def draw(ds, path: Path) -> Path:
                   vmin=-0.5, vmax=count - 0.5, shading="nearest")
     for k in range(count):
         ax.plot([], [], "s", color=colors[k], ms=8,
-                label=f"{ds['attractor_name'].values[k]}: {100 * ds['attractor_share'].values[k]:.1f}%")
+                label=f"{ds['attractor_name'].values[k]}: {100 * ds['attractor_share'].values[k]:.1f}% "
+                      f"({100 * ds['share_low'].values[k]:.1f}-{100 * ds['share_high'].values[k]:.1f}%)")
     ax.set_xlabel("initial velocity of the main mass p0' (m/s)")
     ax.set_ylabel("initial displacement p0 (mm)")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1)

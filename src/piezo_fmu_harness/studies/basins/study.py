@@ -1,41 +1,49 @@
-"""Basins of attraction (issue 23): which motion the machine reaches from where it starts, at one
-frequency.
+"""Basins of attraction (issues 23, 26, 27): which motion the machine reaches from where it starts,
+at one frequency.
 
 A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the middle of the gap
-(``q0 = p0``, ``q0' = 0``), the base starting at phase 0. Each start is a task of the sweep engine:
-its steady state is found as the frequency response finds it
-(:mod:`piezo_fmu_harness.periodic.steady_state`), so it ends on a stable orbit (verified, its
-multipliers inside the unit circle) or on a motion that is not periodic, classified. Each finished
-start is appended to ``points.jsonl``; ``--resume`` runs only the others.
+(``q0 = p0``, ``q0' = 0``), the base starting at phase 0. Every start is marched on the batch
+engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (the rule of
+``piezo_fmu.solver.batch.settle``): a stable orbit it is seen converging to, with its impact
+sequence, the motion without impacts once it provably never reaches a barrier again, or, after
+``--max-cycles`` periods, a motion that is not periodic, classified. The grid is split into chunks
+(:mod:`piezo_fmu_harness.periodic.many`), each a task of the sweep engine, appended to
+``points.jsonl`` as it finishes (``--resume`` runs the others).
 
-The attractors are the distinct end motions: stable orbits by order, impacts per cycle and
-amplitude (within :data:`SAME` relative), motions that are not periodic by their class. The shares
-of the grid that end on each answer "how likely is the good orbit?".
+**The FMU checks the answer.** For every attractor the start that reached it soonest, and a seeded
+random sample of ``--confirm`` starts, are marched through the FMU, which must reach the attractor
+the map gives them (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
 
-Files: ``basins.nc`` (the attractor of each start on ``p0 x dp0``, and the attractors on their own
-dimension), ``basins.csv``, ``summary.json``, ``basins.png``.
+Files: ``basins.nc`` (the attractor of each start on ``p0 x dp0``, the periods it took, the
+attractors with their shares and 95% intervals), ``basins.csv``, ``summary.json`` (the shares, the
+boundary's uncertainty, the checks), ``basins.png``.
 
-The harness reads nothing but the FMU: it never imports the simulation core.
+This study reads the simulation core's batch engine (``piezo_fmu.solver.batch``) besides the FMU,
+which checks it: the one exception, with the fractions and the bifurcation diagram, to the
+harness's rule that it reads nothing but the FMU.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ...periodic.band import solve_point
-from ...periodic.steady_state import Settings
-from ...store import PointStore, open_folder
+from ...periodic.attractors import boundary, merge, shares
+from ...periodic.many import chunks
+from ...store import open_folder
 
 HEADER_FILE = "basins.json"
-#: Two stable orbits of the same order and impacts are the same attractor when their amplitudes
-#: agree within this (relative).
-SAME = 1e-3
-#: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude.
-DEFAULT_SPAN, DEFAULT_COUNT = 2.0, 15
+#: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude,
+#: 101 x 101 starts.
+DEFAULT_SPAN, DEFAULT_COUNT = 2.0, 101
+#: Steady-state settings of the map (the batch engine's ``SettleSettings`` fields).
+DEFAULT_MAX_CYCLES = 1000
+#: FMU checks beyond one per attractor.
+DEFAULT_CONFIRM = 10
 
 
 @dataclass(frozen=True)
@@ -48,115 +56,158 @@ class BasinSpec:
     values: dict
     p0: tuple       # (lo, hi, count), m
     dp0: tuple      # (lo, hi, count), m/s
-    settings: Settings = field(default_factory=Settings)
+    samples: int = 64
+    tolerance: float = 1e-6
+    max_cycles: int = DEFAULT_MAX_CYCLES
+    device: str = "cpu"
+    confirm: int = DEFAULT_CONFIRM
+    seed: int = 0
 
-    def grid(self) -> list[tuple[int, float, float]]:
-        p0 = np.linspace(*self.p0[:2], int(self.p0[2]))
-        dp0 = np.linspace(*self.dp0[:2], int(self.dp0[2]))
-        return [(i * len(dp0) + j, float(p), float(v)) for i, p in enumerate(p0) for j, v in enumerate(dp0)]
+    @property
+    def shape(self) -> tuple[int, int]:
+        return int(self.p0[2]), int(self.dp0[2])
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.linspace(*self.p0[:2], self.shape[0]), np.linspace(*self.dp0[:2], self.shape[1])
+
+    def starts(self) -> np.ndarray:
+        """``(p0, p0', q0, q0')`` of every start, row-major over ``p0 x dp0``."""
+        p0, dp0 = np.meshgrid(*self.axes(), indexing="ij")
+        p0, dp0 = p0.ravel(), dp0.ravel()
+        return np.stack([p0, dp0, p0, np.zeros_like(p0)], axis=1)
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "settings": asdict(self.settings)}
+        return asdict(self)
 
 
-def settle(instance, spec: dict, index: int, p0: float, dp0: float) -> dict:
-    """One start's end motion (a task)."""
-    record = solve_point(instance, index, spec["values"], spec["omega"], spec["amplitude"],
-                         Settings(**spec["settings"]), [p0, dp0, p0, 0.0], 0.0)
-    record.update(p0=p0, dp0=dp0)
-    record.pop("sections", None)
-    return record
+def settle_chunk(instance, spec: dict, number: int, indices: list[int]) -> dict:
+    """A task: march the starts ``indices`` of the map to where they go, on the batch engine."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, settle
+
+    begin = time.perf_counter()
+    basin = BasinSpec(**{**spec, "p0": tuple(spec["p0"]), "dp0": tuple(spec["dp0"])})
+    drive = HarmonicHold(basin.omega, basin.amplitude, 0.0, basin.samples)
+    settled = settle(damper(basin.values), drive, basin.starts()[indices],
+                     settings=SettleSettings(tolerance=basin.tolerance, max_cycles=basin.max_cycles),
+                     device=basin.device)
+    starts, attractors = settled.records()
+    for index, record in zip(indices, starts):
+        record.update(index=index, group=0)
+    return {"index": number, "starts": starts, "attractors": attractors, "cycles": settled.cycles,
+            "seconds": time.perf_counter() - begin}
 
 
 def open_basins(model, spec: BasinSpec, folder: Path, resume: bool, force: bool):
     header = {**spec.to_dict(), "fmu_guid": model.guid}
-    return open_folder(folder, HEADER_FILE, header, tuple(header), resume, force, "--out", "basin map")
+    # the FMU's checks come after the chunks: a resumed map may ask for others
+    same = tuple(k for k in header if k not in ("confirm", "seed"))
+    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "basin map")
 
 
-def execute(spec: BasinSpec, folder: Path, done: dict, start_over: bool, header_text: str, backend) -> dict:
-    """Run every start not yet in ``done``, appending each record as it arrives."""
-    if start_over:
-        PointStore(folder).clear()
-    (folder / HEADER_FILE).write_text(header_text)
-    plain = {"values": spec.values, "omega": spec.omega, "amplitude": spec.amplitude,
-             "settings": asdict(spec.settings)}
-    tasks = [(index, settle, (plain, index, p0, dp0)) for index, p0, dp0 in spec.grid() if index not in done]
-    with PointStore(folder) as store:
-        for _, record in backend.run_tasks(tasks):
-            store.append(record)
-            done[record["index"]] = record
-    return done
+def tasks(spec: BasinSpec) -> list:
+    plain = spec.to_dict()
+    return [(number, settle_chunk, (plain, number, indices))
+            for number, indices in enumerate(chunks(spec.shape[0] * spec.shape[1]))]
 
 
-def attractors(records: list[dict]) -> tuple[list[dict], list[int]]:
-    """The distinct end motions and, for each record, the index of its attractor."""
-    found: list[dict] = []
-    labels = []
-    for record in records:
-        if record.get("status") != "ok":
-            key = {"kind": "error", "motion": "error"}
-        elif record["settled"]:
-            key = {"kind": "stable orbit", "motion": "periodic", "order": record["order"],
-                   "impacts_per_cycle": round(record["impacts_per_cycle"], 6), "amplitude": record["amplitude"],
-                   "max_multiplier": record["max_multiplier"]}
-        else:
-            key = {"kind": "not periodic", "motion": record.get("motion", "unclassified"),
-                   "amplitude": record["amplitude"]}
-        for k, attractor in enumerate(found):
-            if attractor["kind"] == key["kind"] and attractor["motion"] == key["motion"] and (
-                    key["kind"] != "stable orbit" or (attractor["order"] == key["order"]
-                                                      and attractor["impacts_per_cycle"] == key["impacts_per_cycle"]
-                                                      and abs(attractor["amplitude"] - key["amplitude"])
-                                                      <= SAME * attractor["amplitude"])):
-                attractor["starts"] += 1
-                labels.append(k)
-                break
-        else:
-            found.append({**key, "starts": 1})
-            labels.append(len(found) - 1)
-    for attractor in found:
-        attractor["share"] = attractor["starts"] / len(records)
-    return found, labels
+def outcome(spec: BasinSpec, done: dict) -> tuple[list[dict], dict]:
+    """The attractors and each start's record, from the chunks in ``done``."""
+    return merge([done[k] for k in sorted(done)], [(spec.omega, spec.amplitude)])
 
 
-def write(spec: BasinSpec, done: dict, folder: Path) -> dict:
+def payloads(spec: BasinSpec, found: list[dict], starts: dict):
+    """The maker of the FMU checks' payloads (:func:`piezo_fmu_harness.periodic.many.confirm`), each
+    with the batch engine's sections of its start (its ``track``)."""
+    grid = spec.starts()
+    attractors = [{**a, "id": k} for k, a in enumerate(found)]
+
+    def make(chosen: list[int]) -> list[dict]:
+        from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
+
+        periods = [starts[i]["periods"] for i in chosen]
+        paths = tracks(damper(spec.values), HarmonicHold(spec.omega, spec.amplitude, 0.0, spec.samples),
+                       grid[chosen], [0] * len(chosen), periods, spec.device)
+        return [{"index": i, "values": spec.values, "omega": spec.omega, "amplitude": spec.amplitude,
+                 "samples": spec.samples, "start": grid[i].tolist(), "periods": k, "track": path,
+                 "attractors": attractors, "study": starts[i]["attractor"]}
+                for i, k, path in zip(chosen, periods, paths)]
+    return make
+
+
+def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float) -> dict:
     import xarray as xr
 
     from ...datasets import save_dataset
     from .figure import draw
 
-    grid = spec.grid()
-    records = [done[index] for index, _, _ in grid]
-    found, labels = attractors(records)
-    shape = (int(spec.p0[2]), int(spec.dp0[2]))
-    p0 = np.linspace(*spec.p0[:2], shape[0])
-    dp0 = np.linspace(*spec.dp0[:2], shape[1])
-    names = [_name(a) for a in found]
+    shape = spec.shape
+    count = shape[0] * shape[1]
+    labels = np.array([starts[i]["attractor"] for i in range(count)]).reshape(shape)
+    periods = np.array([starts[i]["periods"] for i in range(count)]).reshape(shape)
+    rows = shares(found, starts, 0)
+    order = [row["id"] for row in rows]  # attractors by decreasing share
+    relabel = {old: new for new, old in enumerate(order)}
+    names = _distinct([_name(row) for row in rows])
+    p0, dp0 = spec.axes()
+    numbers = {name: np.array([row.get(name) if row.get(name) is not None else np.nan for row in rows], float)
+               for name in ("share", "share_low", "share_high", "amplitude", "impacts_per_cycle", "max_multiplier")}
     ds = xr.Dataset(
-        {"attractor": (("p0", "dp0"), np.array(labels).reshape(shape),
-                       {"long_name": "index of the motion each start ends on (attractor_name)"}),
-         "amplitude": (("p0", "dp0"), np.array([r.get("amplitude", np.nan) for r in records]).reshape(shape),
-                       {"units": "m", "long_name": "amplitude of the end motion"}),
+        {"attractor": (("p0", "dp0"), np.vectorize(relabel.get)(labels),
+                       {"long_name": "index of the motion each start reaches (attractor_name)"}),
+         "periods": (("p0", "dp0"), periods, {"units": "1", "long_name": "forcing periods marched until the motion "
+                                                                         "was known"}),
          "attractor_name": (("attractor",), np.array(names, dtype=str), {}),
-         "attractor_share": (("attractor",), np.array([a["share"] for a in found]),
-                             {"units": "1", "long_name": "share of the starts that end on it"})},
+         "attractor_share": (("attractor",), numbers["share"], {"units": "1", "long_name": "share of the starts"}),
+         "share_low": (("attractor",), numbers["share_low"], {"units": "1", "long_name": "95% Wilson interval, low"}),
+         "share_high": (("attractor",), numbers["share_high"], {"units": "1", "long_name": "95% Wilson interval, high"}),
+         "attractor_amplitude": (("attractor",), numbers["amplitude"], {"units": "m", "long_name": "amplitude of p"}),
+         "impacts_per_cycle": (("attractor",), numbers["impacts_per_cycle"], {"units": "1"}),
+         "max_multiplier": (("attractor",), numbers["max_multiplier"],
+                            {"units": "1", "long_name": "largest Floquet multiplier (the neutral pair left out)"})},
         coords={"p0": ("p0", p0, {"units": "m", "long_name": "initial displacement of the main mass"}),
                 "dp0": ("dp0", dp0, {"units": "m/s", "long_name": "initial velocity of the main mass"})},
         attrs={"title": "piezo-impact damper: basins of attraction", "ratio": spec.ratio, "omega_rad_per_s": spec.omega,
                "base_amplitude_m": spec.amplitude, "start": "q0 = p0, q0' = 0, base phase 0",
-               "parameters": json.dumps(spec.values)})
+               "parameters": json.dumps(spec.values), "engine": "batch engine, checked through the FMU"})
     save_dataset(ds, folder / "basins.nc")
-    ds.drop_dims("attractor").to_dataframe().reset_index().to_csv(folder / "basins.csv", index=False)
-    report = {"ratio": spec.ratio, "starts": len(records), "attractors": [{**a, "name": n} for a, n in zip(found, names)]}
+    frame = ds.drop_dims("attractor").to_dataframe().reset_index()
+    frame["attractor_name"] = np.array(names)[frame["attractor"].values]
+    frame.to_csv(folder / "basins.csv", index=False)
+    verdicts = [c["verdict"] for c in checks]
+    report = {"ratio": spec.ratio, "starts": count, "grid": list(shape), "wall_s": wall,
+              "attractors": [_summary_row(row, name, relabel) for row, name in zip(rows, names)],
+              "boundary": boundary(ds["attractor"].values),
+              "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
+                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
+                             "starts": [{**c, "study": relabel.get(c["study"]), "fmu": relabel.get(c["fmu"])}
+                                        for c in checks]}}
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     draw(ds, folder / "basins.png")
     return report
 
 
+def _summary_row(row: dict, name: str, relabel: dict) -> dict:
+    keep = ("kind", "motion", "order", "impacts", "impacts_per_cycle", "amplitude", "max_multiplier", "starts",
+            "share", "share_low", "share_high", "sections", "sides")
+    return {"id": relabel[row["id"]], "name": name, **{k: row[k] for k in keep if k in row}}
+
+
+def _distinct(names: list[str]) -> list[str]:
+    """``names`` with a repeat told apart by ``#2``, ``#3``, ... (an orbit and its mirror image)."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} #{seen[name]}")
+    return out
+
+
 def _name(attractor: dict) -> str:
-    if attractor["kind"] == "stable orbit":
+    if attractor["kind"] == "orbit":
         return (f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle, "
-                f"{1e3 * attractor['amplitude']:.3g} mm")
-    if attractor["kind"] == "error":
-        return "refused by the FMU"
+                f"{1e3 * attractor['amplitude']:.2f} mm")
+    if attractor["kind"] == "no impacts":
+        return f"no impacts, {1e3 * attractor['amplitude']:.2f} mm"
+    if attractor["kind"] == "set aside":
+        return "set aside by the batch engine"
     return f"{attractor['motion']} (not periodic)"

@@ -1,0 +1,198 @@
+"""The attractors of a study of many starts, as records: one list for the study, shares with their
+confidence intervals, the uncertainty of a basin map's boundary, and names that keep across a band.
+
+The starts are marched elsewhere (the batch engine, in chunks of the sweep engine); each chunk
+reports its starts' labels and the attractors it met, described as JSON records (``kind`` "orbit",
+"no impacts", or, per start, a motion that is not periodic with its measures). Here they become
+one list per drive (``group``):
+
+- two orbits are the same attractor when their orders, contact onsets per period and section
+  states agree (a point of one within :data:`SAME` of ``Y`` of a point of the other): an
+  asymmetric orbit and its mirror image stay two attractors;
+- the motion without impacts is one attractor per drive (the family where the impact mass rests);
+- the starts that reach no orbit within the cap on periods are one attractor per drive, a motion
+  that is not periodic, classified (:func:`piezo_fmu_harness.periodic.motion.kind`: chaotic,
+  quasi-periodic, strongly modulated, or a transient still converging) by the median of its starts'
+  largest Lyapunov exponents and modulations: one start's estimate over a finite window scatters
+  about a threshold, the attractor's class should not. Two motions that are not periodic at one
+  frequency are therefore not told apart.
+
+**Shares** are the fractions of the starts that end on each attractor, with the 95% Wilson score
+interval of a binomial proportion (for a grid of starts, as if its cells were a random sample).
+**The boundary** of a basin map: the fraction of cells with a neighbour on another attractor, and
+the basin entropy of Daza et al. (2016): the mean Gibbs entropy of the attractors in boxes of
+``box x box`` cells (``S_b``) and over the boxes that hold more than one (``S_bb``; above
+``ln 2`` the boundary is fractal).
+
+The harness reads nothing but the FMU here: this module handles records only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .motion import kind
+
+#: Two orbit records of one drive are the same attractor when a section state of one lies within
+#: this many ``Y`` of one of the other's (the batch engine's orbits are within 1e-6 Y of exact).
+SAME = 1e-4
+#: z of a two-sided 95% interval.
+Z95 = 1.959963984540054
+
+
+def wilson(count: int, total: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of the proportion ``count / total``."""
+    if total == 0:
+        return math.nan, math.nan
+    p = count / total
+    denominator = 1.0 + z * z / total
+    centre = (p + z * z / (2 * total)) / denominator
+    half = z * math.sqrt(p * (1 - p) / total + z * z / (4 * total * total)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _scaled_gap(a: list, b: list, omega: float) -> float:
+    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+    a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+    gaps = np.abs((a[:, None, :] - b[None, :, :]) * scale)
+    return float(np.nanmax(gaps, axis=2).min())
+
+
+def same(a: dict, b: dict, omega: float, amplitude: float) -> bool:
+    """Whether two attractor records of one drive (``omega`` rad/s, ``Y`` m) are one attractor."""
+    if a["group"] != b["group"] or a["kind"] != b["kind"]:
+        return False
+    if a["kind"] != "orbit":  # one motion without impacts, one not periodic, per drive
+        return True
+    return (a["order"] == b["order"] and sorted(a["impacts"]) == sorted(b["impacts"])
+            and _scaled_gap(a["sections"], b["sections"], omega) <= SAME * amplitude)
+
+
+def merge(chunks: list[dict], drives: list[tuple[float, float]]) -> tuple[list[dict], dict[int, dict]]:
+    """One list of attractors from the chunks' results, and each start's record by its index with
+    ``attractor`` (the index into that list) added. ``drives``: ``(omega, Y)`` of each group.
+
+    A chunk is ``{"starts": [{"index", "group", "label", "periods", ...}], "attractors": [...]}``
+    (label -1: not periodic, with its measures; -2: set aside by the engine).
+    """
+    found: list[dict] = []
+    starts: dict[int, dict] = {}
+
+    def place(record: dict) -> int:
+        omega, amplitude = drives[record["group"]]
+        for k, other in enumerate(found):
+            if same(other, record, omega, amplitude):
+                return k
+        found.append({**record})
+        return len(found) - 1
+
+    for chunk in chunks:
+        local = [place(record) for record in chunk["attractors"]]
+        for record in chunk["starts"]:
+            if record["label"] >= 0:
+                target = local[record["label"]]
+            elif record["label"] == -1:
+                target = place({"kind": "not periodic", "group": record["group"]})
+            else:
+                target = place({"kind": "set aside", "group": record["group"]})
+            starts[record["index"]] = {**record, "attractor": target}
+    _not_periodic_measures(found, starts)
+    return found, starts
+
+
+def _not_periodic_measures(found: list[dict], starts: dict) -> None:
+    """The median measures of the starts on each motion that is not periodic, and its class."""
+    for k, attractor in enumerate(found):
+        if attractor["kind"] != "not periodic":
+            continue
+        members = [r for r in starts.values() if r["attractor"] == k]
+        for name in ("amplitude", "amplitude_min", "amplitude_max", "impacts_per_cycle", "exponent", "modulation"):
+            values = [r[name] for r in members if r.get(name) is not None]
+            attractor[name] = float(np.median(values)) if values else None
+        attractor["motion"] = (kind(attractor["exponent"], attractor["modulation"])
+                               if attractor["exponent"] is not None else "unclassified")
+
+
+def shares(found: list[dict], starts: dict, group: int) -> list[dict]:
+    """The attractors of ``group`` with ``starts`` (count), ``share`` and ``share_low``/``share_high``
+    (95% Wilson interval), by decreasing share."""
+    members = [r for r in starts.values() if r["group"] == group]
+    total = len(members)
+    rows = []
+    for k, attractor in enumerate(found):
+        if attractor["group"] != group:
+            continue
+        count = sum(1 for r in members if r["attractor"] == k)
+        low, high = wilson(count, total)
+        rows.append({**attractor, "id": k, "starts": count, "share": count / total if total else math.nan,
+                     "share_low": low, "share_high": high})
+    return sorted(rows, key=lambda row: -row["starts"])
+
+
+def boundary(labels: np.ndarray, box: int = 5) -> dict:
+    """How uncertain a basin map's boundary is (see the module's text): ``boundary_fraction``,
+    ``basin_entropy`` (``S_b``), ``boundary_basin_entropy`` (``S_bb``), and the ``box`` size."""
+    labels = np.asarray(labels)
+    differs = np.zeros(labels.shape, bool)
+    differs[1:, :] |= labels[1:, :] != labels[:-1, :]
+    differs[:-1, :] |= labels[:-1, :] != labels[1:, :]
+    differs[:, 1:] |= labels[:, 1:] != labels[:, :-1]
+    differs[:, :-1] |= labels[:, :-1] != labels[:, 1:]
+    rows, cols = labels.shape[0] // box, labels.shape[1] // box
+    entropies = []
+    for i in range(rows):
+        for j in range(cols):
+            cell = labels[i * box:(i + 1) * box, j * box:(j + 1) * box].ravel()
+            _, counts = np.unique(cell, return_counts=True)
+            p = counts / counts.sum()
+            entropies.append(float(-(p * np.log(p)).sum()))
+    entropies = np.array(entropies)
+    mixed = entropies > 0
+    return {"boundary_fraction": float(differs.mean()), "box": box,
+            "basin_entropy": float(entropies.mean()) if entropies.size else math.nan,
+            "boundary_basin_entropy": float(entropies[mixed].mean()) if mixed.any() else 0.0,
+            "boxes": int(entropies.size), "boundary_boxes": int(mixed.sum())}
+
+
+def base_name(attractor: dict) -> str:
+    """The name of an attractor's kind: "order n, k impacts/cycle", "no impacts", or the class of a
+    motion that is not periodic."""
+    if attractor["kind"] == "orbit":
+        return f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle"
+    if attractor["kind"] == "not periodic":
+        return f"{attractor['motion']} (not periodic)"
+    return attractor["kind"]
+
+
+def track_names(found: list[dict], groups: list[int]) -> list[str]:
+    """A name for each attractor that keeps across the drives ``groups`` (in band order): attractors
+    of one kind present at one frequency are told apart by amplitude (#1 the largest), and matched
+    to the previous frequency's of the same kind by the nearest amplitude."""
+    names = [""] * len(found)
+    previous: dict[str, list[tuple[str, float]]] = {}
+    for group in groups:
+        members = [k for k, a in enumerate(found) if a["group"] == group]
+        now: dict[str, list[tuple[str, float]]] = {}
+        by_kind: dict[str, list[int]] = {}
+        for k in members:
+            by_kind.setdefault(base_name(found[k]), []).append(k)
+        for base, ks in by_kind.items():
+            ks.sort(key=lambda k: -(found[k].get("amplitude") or 0.0))
+            earlier = list(previous.get(base, []))
+            taken: list[str] = []
+            for rank, k in enumerate(ks):
+                amplitude = found[k].get("amplitude") or 0.0
+                free = [(name, a) for name, a in earlier if name not in taken]
+                if free:
+                    name = min(free, key=lambda item: abs(math.log(max(amplitude, 1e-300) / max(item[1], 1e-300))))[0]
+                else:
+                    used = {n for n in taken} | {n for n, _ in earlier}
+                    name = base if len(ks) == 1 and base not in used else next(
+                        f"{base} #{i}" for i in range(2, len(ks) + len(used) + 3) if f"{base} #{i}" not in used)
+                taken.append(name)
+                names[k] = name
+                now.setdefault(base, []).append((name, amplitude))
+        previous.update(now)
+    return names

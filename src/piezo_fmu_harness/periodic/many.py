@@ -1,0 +1,132 @@
+"""Studies of many starts (basins, fractions): their chunks on the sweep engine, kept as they
+finish, and the check of their answers through the FMU.
+
+A study of many starts splits them into chunks of a fixed size (so that ``--resume`` finds the same
+chunks again); each chunk is a task of the engine (:mod:`piezo_fmu_harness.engine`), marched by the
+study on the batch engine, and its record (its starts' labels and the attractors it met,
+:mod:`.attractors`) is appended to ``points.jsonl`` as it arrives.
+
+The FMU then checks the answer: for each attractor, the start that reached it soonest, and a seeded
+random sample of the other starts, are marched through the FMU (:func:`.confirm.fmu_label`), each
+a task too. A check **agrees** when the FMU's trajectory reaches the attractor the study gave the
+start; it **parted** when the answers differ but the FMU's sections had left the study's (passed as
+``track``) before the study's answer was known: a chaotic transient, whose end no double-precision
+code predicts; otherwise it **disagrees**.
+
+The harness reads nothing but the FMU here: it never imports the simulation core.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..store import PointStore
+from .confirm import fmu_label
+
+#: Starts in a chunk.
+CHUNK = 1024
+
+
+def chunks(count: int, size: int = CHUNK) -> list[list[int]]:
+    """The start indices of each chunk."""
+    return [list(range(begin, min(begin + size, count))) for begin in range(0, count, size)]
+
+
+def backend_for(args, model, unzipdir: str, instance, jobs: int):
+    """The engine's backend the options ask for; this process's instance for ``--jobs 1``."""
+    from ..checks import make_backend
+    from ..engine import InProcess
+
+    if jobs == 1 and not (args.scheduler or args.dask_local):
+        return InProcess(instance)
+    return make_backend(args, model, unzipdir, jobs)
+
+
+def execute(what: str, tasks: list, folder: Path, done: dict, start_over: bool, header_file: str, header: dict,
+            backend, total: int, progress, device: str) -> bool:
+    """Run the chunk ``tasks`` not in ``done`` (by chunk index) on ``backend``, appending each
+    record as it arrives; ``total`` starts in all, for the progress bar. False when interrupted
+    (Ctrl-C), after saying how to resume."""
+    from tqdm import tqdm
+
+    from ..checks import PROG
+
+    print(f"{PROG} {what}: {total} starts on the batch engine ({device}), in chunks on {backend.description}",
+          file=sys.stderr)
+    if start_over:
+        PointStore(folder).clear()
+    (folder / header_file).write_text(json.dumps(header, indent=2) + "\n")
+    finished = sum(len(record["starts"]) for record in done.values())
+    bar = tqdm(total=total, initial=finished, unit="start", desc=what, dynamic_ncols=True,
+               disable=(not progress) if progress is not None else None, file=sys.stderr)
+    try:
+        with PointStore(folder) as store:
+            for _, record in backend.run_tasks([task for task in tasks if task[0] not in done]):
+                store.append(record)
+                done[record["index"]] = record
+                bar.update(len(record["starts"]))
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"\n{PROG} {what}: interrupted; {sum(len(r['starts']) for r in done.values())} starts are saved; run "
+              "the same command with --resume", file=sys.stderr)
+        return False
+    bar.close()
+    return True
+
+
+def candidates(starts: dict, tries: int) -> dict[int, list[int]]:
+    """For each attractor, up to ``tries`` of its starts, those labelled soonest first."""
+    members: dict[int, list[dict]] = {}
+    for record in starts.values():
+        members.setdefault(record["attractor"], []).append(record)
+    return {k: [r["index"] for r in sorted(rows, key=lambda r: (r["periods"], r["index"]))[:tries]]
+            for k, rows in members.items()}
+
+
+def sample(starts: dict, count: int, seed: int, exclude=()) -> list[int]:
+    """``count`` starts drawn at random (seeded) from those not in ``exclude``."""
+    others = sorted(set(starts) - set(exclude))
+    rng = np.random.default_rng(seed)
+    return sorted(int(i) for i in rng.choice(others, size=min(count, len(others)), replace=False)) if others else []
+
+
+def confirm_task(instance, payload: dict) -> dict:
+    """A task: the FMU's label for one start (``payload``: the drive, the start, the periods the
+    study marched it, the drive's attractors, the study's label)."""
+    result = fmu_label(instance, payload["values"], payload["omega"], payload["amplitude"], payload["samples"],
+                       payload["start"], payload["periods"], payload["attractors"], payload.get("track"))
+    agree = result["attractor"] == payload["study"]
+    parted = result["diverged_at"] is not None and result["diverged_at"] <= payload["periods"]
+    return {"index": payload["index"], "study": payload["study"], "fmu": result["attractor"],
+            "fmu_motion": result["motion"], "fmu_periods": result["periods"], "study_periods": payload["periods"],
+            "study_motion": next((a.get("motion") for a in payload["attractors"] if a["id"] == payload["study"]), None),
+            "diverged_at": result["diverged_at"],
+            "verdict": "agrees" if agree else "parted" if parted else "disagrees", "agree": agree}
+
+
+def confirm(backend, groups: list[tuple], tries: int = 3) -> list[dict]:
+    """The FMU's checks (:func:`confirm_task`) on ``backend``, for each group ``(payloads, starts,
+    count, seed)`` of starts (a drive's): every attractor from the start labelled soonest, and again
+    from the next one (up to ``tries``) while the FMU has not agreed on one of its starts; and
+    ``count`` starts drawn at random. ``payloads(indices)`` makes the tasks' payloads. All the
+    groups' checks of a round run together. Returns the checks' records by start index."""
+    options = [candidates(starts, tries) for _, starts, _, _ in groups]
+    todo = []
+    for (_, starts, count, seed), choice in zip(groups, options):
+        first = [indices[0] for indices in choice.values()]
+        todo.append(first + sample(starts, count, seed, first))
+    results: list[dict] = []
+    for attempt in range(tries):
+        tasks = [(p["index"], confirm_task, (p,)) for (make, _, _, _), chosen in zip(groups, todo) if chosen
+                 for p in make(chosen)]
+        if not tasks:
+            break
+        results += [record for _, record in backend.run_tasks(tasks)]
+        agreed = {r["study"] for r in results if r["agree"]}
+        todo = [[indices[attempt + 1] for k, indices in choice.items() if k not in agreed and len(indices) > attempt + 1]
+                for choice in options]
+    return sorted(results, key=lambda r: r["index"])

@@ -1,0 +1,33 @@
+"""``fractions.png``: the share of each attractor stacked over frequency, and each attractor's
+amplitude."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ...drawing import new_figure, save_png
+
+
+def draw(ds, path: Path) -> Path:
+    fig, (top, bottom) = new_figure((7.5, 7.5), 2, 1)
+    ratio = ds["ratio"].values
+    names = [str(n) for n in ds["attractor_name"].values]
+    colors = [f"C{k % 10}" for k in range(len(names))]
+    fractions = ds["fraction"].values.T
+    top.stackplot(ratio, 100 * fractions, labels=names, colors=colors, alpha=0.85)
+    top.set_ylabel("share of the starts (%)")
+    top.set_ylim(0, 100)
+    top.set_xlim(ratio.min(), ratio.max())
+    top.set_title(f"Where {ds.attrs['starts_per_frequency']} random starts go, at each frequency", fontsize=9)
+    top.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2)
+    for k, name in enumerate(names):
+        amplitude = ds["amplitude"].values[:, k]
+        shown = np.isfinite(amplitude) & (ds["fraction"].values[:, k] > 0)
+        if shown.any():
+            bottom.semilogy(ratio[shown], 1e3 * amplitude[shown], "o-", ms=3, color=colors[k], label=name)
+    bottom.set_xlabel("w / sqrt(K/M)")
+    bottom.set_ylabel("amplitude of the main mass (mm)")
+    bottom.set_xlim(ratio.min(), ratio.max())
+    return save_png(fig, path)

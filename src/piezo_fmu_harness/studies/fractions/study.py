@@ -1,0 +1,217 @@
+"""Global stability across a band (issue 26): at each frequency, how likely each motion is.
+
+At each of ``--count`` frequencies from ``--ratio-min`` to ``--ratio-max`` times ``sqrt(K/M)``,
+``--starts`` random starts are marched on the batch engine (``piezo_fmu.solver.batch``) to the
+motion each one's trajectory reaches (the rule of ``piezo_fmu.solver.batch.settle``), and the
+fraction of the starts on each attractor is its share. This answers a designer's question that
+continuation, which follows one orbit at a time, cannot: how likely the good motion is.
+
+**The starts** (seeded by ``--seed``, the same draws at every frequency so that the shares change
+with the frequency, not with the draw): ``p0`` uniform in ``[-S, S]``, ``p0'`` uniform in
+``[-S w_n, S w_n]`` (``S`` = ``--span``, the gap ``d`` by default), the impact mass at rest
+(``q0' = 0``) anywhere in the gap, uniformly. A start whose impact mass moves would end on the motion
+without impacts with probability 0 (a drifting impact mass always reaches a barrier), so at rest
+is where the question is open.
+
+**Names across the band.** The attractors of each frequency are matched to the previous
+frequency's by kind (order and impacts per cycle, or the class of a motion that is not periodic)
+and the nearest amplitude (:func:`piezo_fmu_harness.periodic.attractors.track_names`), so each
+keeps one name across the band.
+
+The frequencies are grouped into chunks of the sweep engine, each chunk one batch, appended to
+``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: at every frequency
+the start that reached each attractor soonest, and ``--confirm`` more drawn at random, are marched
+through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.periodic.confirm`).
+
+Files: ``fractions.nc`` (the fraction of each attractor over frequency, adding to 1 at every
+frequency, with its 95% interval; each attractor's amplitude and impacts per cycle),
+``fractions.csv``, ``summary.json`` (the shares at each frequency, the checks), ``fractions.png``
+(the shares stacked over frequency, and each attractor's amplitude).
+
+This study reads the simulation core's batch engine besides the FMU, which checks it: the one
+exception, with the basins and the bifurcation diagram, to the harness's rule that it reads
+nothing but the FMU.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...periodic.attractors import merge, shares, track_names
+from ...periodic.many import CHUNK, confirm
+from ...store import open_folder
+
+HEADER_FILE = "fractions.json"
+#: The band's defaults: 61 frequencies over 0.5 to 2 sqrt(K/M).
+DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 600, "fewest": 1}
+DEFAULT_STARTS = 500
+#: FMU checks per frequency besides one per attractor.
+DEFAULT_CONFIRM = 1
+
+
+@dataclass(frozen=True)
+class FractionSpec:
+    """One fractions study (SI)."""
+
+    ratios: tuple
+    natural: float
+    amplitudes: tuple   # Y (m) at each frequency
+    values: dict
+    starts: int
+    span: float         # m
+    seed: int
+    samples: int = 64
+    tolerance: float = 1e-6
+    max_cycles: int = DEFAULTS["max_cycles"]
+    device: str = "cpu"
+    confirm: int = DEFAULT_CONFIRM
+
+    @property
+    def omegas(self) -> np.ndarray:
+        return np.array(self.ratios) * self.natural
+
+    def draws(self) -> np.ndarray:
+        """``(starts, 3)`` uniform draws in [-1, 1]: ``p0``, ``p0'`` and the impact mass's place."""
+        return np.random.default_rng(self.seed).uniform(-1.0, 1.0, (self.starts, 3))
+
+    def states(self) -> np.ndarray:
+        """The starts ``(p0, p0', q0, q0')``, the same at every frequency."""
+        u = self.draws()
+        p0 = self.span * u[:, 0]
+        half_gap = 0.5 * self.values["d"]
+        return np.stack([p0, self.span * self.natural * u[:, 1], p0 + half_gap * u[:, 2], np.zeros(self.starts)], axis=1)
+
+    def chunks(self) -> list[list[int]]:
+        """The frequencies of each chunk (about :data:`CHUNK` starts each)."""
+        size = max(1, CHUNK // self.starts)
+        return [list(range(k, min(k + size, len(self.ratios)))) for k in range(0, len(self.ratios), size)]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def settle_chunk(instance, spec: dict, number: int, frequencies: list[int]) -> dict:
+    """A task: the starts at the frequencies ``frequencies``, one batch, to where they go."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, settle
+
+    begin = time.perf_counter()
+    study = FractionSpec(**{**spec, "ratios": tuple(spec["ratios"]), "amplitudes": tuple(spec["amplitudes"])})
+    drives = [HarmonicHold(float(study.omegas[f]), study.amplitudes[f], 0.0, study.samples) for f in frequencies]
+    states = study.states()
+    n = len(states)
+    settled = settle(damper(study.values), drives, np.tile(states, (len(frequencies), 1)),
+                     np.repeat(np.arange(len(frequencies)), n),
+                     SettleSettings(tolerance=study.tolerance, max_cycles=study.max_cycles), device=study.device)
+    starts, attractors = settled.records()
+    for k, record in enumerate(starts):
+        f = frequencies[k // n]
+        record.update(index=f * n + k % n, group=f)
+    for record in attractors:
+        record["group"] = frequencies[record["group"]]
+    return {"index": number, "frequencies": frequencies, "starts": starts, "attractors": attractors,
+            "cycles": settled.cycles, "seconds": time.perf_counter() - begin}
+
+
+def open_fractions(model, spec: FractionSpec, folder: Path, resume: bool, force: bool):
+    header = {**spec.to_dict(), "fmu_guid": model.guid}
+    # the FMU's checks come after the chunks: a resumed study may ask for others
+    same = tuple(k for k in header if k != "confirm")
+    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "fractions study")
+
+
+def tasks(spec: FractionSpec) -> list:
+    plain = spec.to_dict()
+    return [(number, settle_chunk, (plain, number, frequencies)) for number, frequencies in enumerate(spec.chunks())]
+
+
+def outcome(spec: FractionSpec, done: dict) -> tuple[list[dict], dict]:
+    return merge([done[k] for k in sorted(done)], list(zip(spec.omegas.tolist(), spec.amplitudes)))
+
+
+def checks(spec: FractionSpec, found: list[dict], starts: dict, backend) -> list[dict]:
+    """The FMU's checks, frequency by frequency (:func:`piezo_fmu_harness.periodic.many.confirm`):
+    every attractor from one of its starts, and ``confirm`` random starts, each with the batch
+    engine's sections of its start (its ``track``)."""
+    from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
+
+    states = spec.states()
+    groups = []
+    for f in range(len(spec.ratios)):
+        here = {i: r for i, r in starts.items() if r["group"] == f}
+        attractors = [{**a, "id": k} for k, a in enumerate(found) if a["group"] == f]
+        drive = HarmonicHold(float(spec.omegas[f]), spec.amplitudes[f], 0.0, spec.samples)
+
+        def make(chosen: list[int], f=f, here=here, drive=drive, attractors=attractors) -> list[dict]:
+            periods = [here[i]["periods"] for i in chosen]
+            paths = tracks(damper(spec.values), drive, states[[i % spec.starts for i in chosen]], [0] * len(chosen),
+                           periods, spec.device)
+            return [{"index": i, "values": spec.values, "omega": float(spec.omegas[f]),
+                     "amplitude": spec.amplitudes[f], "samples": spec.samples, "start": states[i % spec.starts].tolist(),
+                     "periods": k, "track": path, "attractors": attractors, "study": here[i]["attractor"]}
+                    for i, k, path in zip(chosen, periods, paths)]
+        groups.append((make, here, spec.confirm, spec.seed + f))
+    return confirm(backend, groups)
+
+
+def build_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: list[str]):
+    import xarray as xr
+
+    order = sorted(set(names), key=lambda name: min(k for k, n in enumerate(names) if n == name))
+    F, A = len(spec.ratios), len(order)
+    fraction, low, high = np.zeros((F, A)), np.zeros((F, A)), np.zeros((F, A))
+    amplitude, impacts = np.full((F, A), np.nan), np.full((F, A), np.nan)
+    for f in range(F):
+        for row in shares(found, starts, f):
+            a = order.index(names[row["id"]])
+            fraction[f, a], low[f, a], high[f, a] = row["share"], row["share_low"], row["share_high"]
+            amplitude[f, a] = row.get("amplitude") if row.get("amplitude") is not None else np.nan
+            impacts[f, a] = row.get("impacts_per_cycle") if row.get("impacts_per_cycle") is not None else np.nan
+    dims = ("omega", "attractor")
+    return xr.Dataset(
+        {"fraction": (dims, fraction, {"units": "1", "long_name": "share of the starts that reach the attractor"}),
+         "fraction_low": (dims, low, {"units": "1", "long_name": "95% Wilson interval, low"}),
+         "fraction_high": (dims, high, {"units": "1", "long_name": "95% Wilson interval, high"}),
+         "amplitude": (dims, amplitude, {"units": "m", "long_name": "amplitude of p on the attractor"}),
+         "impacts_per_cycle": (dims, impacts, {"units": "1", "long_name": "impacts per forcing cycle"}),
+         "attractor_name": (("attractor",), np.array(order, dtype=str), {})},
+        coords={"omega": ("omega", spec.omegas, {"units": "rad/s", "long_name": "forcing frequency"}),
+                "ratio": ("omega", np.array(spec.ratios), {"units": "1", "long_name": "w / sqrt(K/M)"})},
+        attrs={"title": "piezo-impact damper: basin fractions across the band", "starts_per_frequency": spec.starts,
+               "seed": spec.seed, "span_m": spec.span, "parameters": json.dumps(spec.values),
+               "start": "p0 in [-S, S], p0' in [-S w_n, S w_n], impact mass at rest anywhere in the gap, base phase 0",
+               "engine": "batch engine, checked through the FMU"})
+
+
+def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
+          cycles: int) -> dict:
+    from ...datasets import save_dataset
+    from .figure import draw
+
+    names = track_names(found, list(range(len(spec.ratios))))
+    ds = build_dataset(spec, found, starts, names)
+    save_dataset(ds, folder / "fractions.nc")
+    frame = ds[["fraction", "fraction_low", "fraction_high", "amplitude", "impacts_per_cycle"]].to_dataframe()
+    frame = frame.reset_index()
+    frame["attractor"] = ds["attractor_name"].values[frame["attractor"].values]
+    frame[frame["fraction"] > 0].to_csv(folder / "fractions.csv", index=False)
+    verdicts = [c["verdict"] for c in checks]
+    per_frequency = [{"ratio": r, "attractors": [{"name": names[row["id"]], "share": row["share"],
+                                                  "share_low": row["share_low"], "share_high": row["share_high"],
+                                                  "amplitude": row.get("amplitude"), "kind": row["kind"]}
+                                                 for row in shares(found, starts, f)]}
+                     for f, r in enumerate(spec.ratios)]
+    report = {"frequencies": len(spec.ratios), "starts_per_frequency": spec.starts, "wall_s": wall,
+              "start_periods": cycles, "attractors": [str(n) for n in ds["attractor_name"].values],
+              "by_frequency": per_frequency,
+              "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
+                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
+                             "starts": [{**c, "study": names[c["study"]] if c["study"] is not None else None,
+                                         "fmu": names[c["fmu"]] if c["fmu"] is not None else None} for c in checks]}}
+    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    draw(ds, folder / "fractions.png")
+    return report

@@ -1,0 +1,101 @@
+"""The FMU marched under harmonic base motion with fmpy alone: the independent route by which the
+tests check where a study says a start goes.
+
+Nothing of the project's harness or core is used: the FMU is instantiated with fmpy's ``FMU2Slave``,
+its parameters set by value reference, and the base given as the first-order hold that the FMU's
+inputs describe (``N`` nodes a period whose fundamental is ``Y sin(w t)``, the slope of each step
+the chord to the next node), written out here again.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+FMU = Path(__file__).resolve().parents[1] / "fmus" / "PiezoImpactDamper.fmu"
+
+
+class Marcher:
+    """One instance of the FMI 2.0 FMU, reset for every march."""
+
+    def __init__(self, fmu: Path = FMU):
+        self.description = read_model_description(str(fmu))
+        self.unzipdir = extract(str(fmu))
+        self.variables = {v.name: v for v in self.description.modelVariables}
+        self.fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzipdir,
+                             modelIdentifier=self.description.coSimulation.modelIdentifier, instanceName="march")
+        self.fmu.instantiate()
+        self.started = False
+
+    def close(self) -> None:
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+        shutil.rmtree(self.unzipdir, ignore_errors=True)
+
+    def _set(self, values: dict) -> None:
+        for name, value in values.items():
+            v = self.variables[name]
+            if v.type == "Integer":
+                self.fmu.setInteger([v.valueReference], [int(value)])
+            else:
+                self.fmu.setReal([v.valueReference], [float(value)])
+
+    def march(self, values: dict, omega: float, amplitude: float, start, periods: int, samples: int = 64) -> dict:
+        """``periods`` forcing periods from ``start`` (``p, p', q, q'``): the state at the end of
+        each period, the contact onsets in each, and the largest and smallest sampled ``p`` of each."""
+        if self.started:
+            self.fmu.reset()
+        self.started = True
+        n = samples
+        h = 2.0 * math.pi / omega / n
+        nodes = [amplitude / (math.sin(math.pi / n) / (math.pi / n)) ** 2 * math.sin(2.0 * math.pi * k / n)
+                 for k in range(n + 1)]
+        slopes = [(nodes[k + 1] - nodes[k]) / h for k in range(n)]
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        self._set({**values, "p0": start[0], "dp0": start[1], "q0": start[2], "dq0": start[3]})
+        self._set({"base_displacement": nodes[0], "base_velocity": slopes[0]})
+        self.fmu.exitInitializationMode()
+        refs = [self.variables[name].valueReference for name in ("main_displacement", "main_velocity",
+                                                                   "impactor_displacement", "impactor_velocity")]
+        inputs = [self.variables["base_displacement"].valueReference, self.variables["base_velocity"].valueReference]
+        count_ref = [self.variables["impact_count"].valueReference]
+        sections, onsets, tops, bottoms = [], [], [], []
+        count = self.fmu.getInteger(count_ref)[0]
+        step = 0
+        for _ in range(periods):
+            p_values = []
+            for k in range(n):
+                self.fmu.setReal(inputs, [nodes[k], slopes[k]])
+                self.fmu.doStep(currentCommunicationPoint=step * h, communicationStepSize=(step + 1) * h - step * h)
+                step += 1
+                p_values.append(self.fmu.getReal(refs[:1])[0])
+            sections.append(self.fmu.getReal(refs))
+            now = self.fmu.getInteger(count_ref)[0]
+            onsets.append(now - count)
+            count = now
+            tops.append(max(p_values))
+            bottoms.append(min(p_values))
+        return {"sections": np.array(sections), "onsets": np.array(onsets), "top": np.array(tops),
+                "bottom": np.array(bottoms)}
+
+
+def reaches(run: dict, attractor: dict, omega: float, window: int = 40) -> bool:
+    """Whether the march ``run`` ends on ``attractor`` (a study's record): an orbit's contact onsets
+    in every period of the last ``window`` and its sections within 1e-3 of its size of the orbit's,
+    or, for the motion without impacts, no onset in the window with the impact mass at rest."""
+    onsets, sections = run["onsets"][-window:], run["sections"][-window:]
+    if attractor["kind"] == "no impacts":
+        return bool(onsets.sum() == 0 and sections[-1, 3] == 0.0)
+    if attractor["kind"] != "orbit":
+        return False
+    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+    points = np.array(attractor["sections"], dtype=float)
+    size = float(np.abs(points * scale).max())
+    gap = np.abs((sections[-1][None] - points) * scale).max(axis=1).min()
+    return bool(sorted(set(onsets.tolist())) == sorted(set(attractor["impacts"])) and gap <= 1e-3 * size)

@@ -1,0 +1,137 @@
+"""Basin fractions across a band (issue 26): at each frequency the share of random starts that reach
+each attractor, adding to 1, with names kept across the band; every attractor and a random sample of
+starts checked by the FMU marched with fmpy alone."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fmpy_march import Marcher, reaches
+from fmu_host import assert_refused, run_cli
+
+from piezo_fmu_harness.datasets import open_dataset
+
+ROOT = Path(__file__).resolve().parent.parent
+FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
+W_N = math.sqrt(1000.0)
+STARTS = 40
+BAND = ("--ratio-min", 1.15, "--ratio-max", 1.25, "--count", 3, "--starts", STARTS, "--fmu", FMU, "--no-progress")
+
+
+@pytest.fixture(scope="module")
+def fractions(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fractions")
+    assert run_cli("fractions", *BAND, "--jobs", 2, "--out", out) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def summary(fractions) -> dict:
+    return json.loads((fractions / "summary.json").read_text())
+
+
+def test_the_fractions_add_to_one_at_every_frequency_within_their_intervals(fractions):
+    ds = open_dataset(fractions / "fractions.nc")
+    assert ds.sizes["omega"] == 3
+    assert np.allclose(ds["fraction"].sum("attractor").values, 1.0, atol=1e-12)
+    present = ds["fraction"].values > 0
+    assert (ds["fraction_low"].values <= ds["fraction"].values).all()
+    assert (ds["fraction"].values <= ds["fraction_high"].values).all()
+    assert np.isfinite(ds["amplitude"].values[present]).all()
+    assert (fractions / "fractions.png").stat().st_size > 0
+    assert (fractions / "fractions.csv").read_text().startswith("omega,attractor,")
+
+
+def test_the_two_impact_orbit_keeps_one_name_across_the_band(fractions):
+    ds = open_dataset(fractions / "fractions.nc")
+    names = [str(n) for n in ds["attractor_name"].values]
+    two = names.index("order 1, 2 impacts/cycle")
+    assert (ds["fraction"].values[:2, two] == 1.0).all() and 0 < ds["fraction"].values[2, two] < 1.0
+    amplitude = ds["amplitude"].values[:, two]
+    assert np.all(np.diff(amplitude) < 0)  # one branch, its amplitude falling with the frequency
+
+
+def test_every_attractor_at_every_frequency_was_checked_by_the_fmu_and_none_disagreed(summary):
+    """A check may part from the study in a chaotic transient (at 1.25 w_n starts wander chaotically
+    for hundreds of periods before some land on the orbit): then the FMU's trajectory had left the
+    batch engine's before the study's answer was known. None may disagree while they were together."""
+    checks = summary["fmu_checks"]
+    assert checks["disagree"] == 0 and checks["agree"] + checks["parted"] == checks["checked"]
+    for check in checks["starts"]:
+        if check["verdict"] == "parted":
+            assert check["diverged_at"] <= check["study_periods"]
+    agreed = {(c["index"] // STARTS, c["study"]) for c in checks["starts"] if c["verdict"] == "agrees"}
+    present = {(f, a["name"]) for f, point in enumerate(summary["by_frequency"]) for a in point["attractors"]}
+    assert agreed >= present  # every attractor at every frequency: one start the FMU took there
+
+
+def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_unpredictable(fractions):
+    """Each sampled start, marched with fmpy alone, ends on the study's attractor; or else its fate is
+    shown to hang on the last bits: the same start moved by 1e-12 of its size parts from it (by
+    1e-3 of the size) before the study's answer was known."""
+    header = json.loads((fractions / "fractions.json").read_text())
+    values = header["values"]
+    u = np.random.default_rng(header["seed"]).uniform(-1.0, 1.0, (STARTS, 3))
+    chunks = [json.loads(line) for line in (fractions / "points.jsonl").read_text().splitlines()]
+    marcher = Marcher(FMU)
+    try:
+        for index in np.random.default_rng(5).choice(3 * STARTS, size=4, replace=False):
+            f, j = divmod(int(index), STARTS)
+            chunk = next(c for c in chunks if f in c["frequencies"])
+            record = next(r for r in chunk["starts"] if r["index"] == int(index))
+            attractor = chunk["attractors"][record["label"]] if record["label"] >= 0 else {"kind": "not periodic"}
+            omega = header["ratios"][f] * W_N
+            p0 = header["span"] * u[j, 0]
+            start = np.array([p0, header["span"] * W_N * u[j, 1], p0 + 0.5 * values["d"] * u[j, 2], 0.0])
+            periods = record["periods"] + 200
+            run = marcher.march(values, omega, header["amplitudes"][f], start, periods)
+            if attractor["kind"] == "not periodic":
+                assert not _settled(run, omega), int(index)
+                continue
+            if reaches(run, attractor, omega):
+                continue
+            moved = marcher.march(values, omega, header["amplitudes"][f], start * (1 + 1e-12), record["periods"])
+            scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+            size = np.abs(run["sections"][:record["periods"]] * scale).max()
+            assert np.abs((moved["sections"] - run["sections"][:record["periods"]]) * scale).max() > 1e-3 * size
+    finally:
+        marcher.close()
+
+
+def _settled(run: dict, omega: float) -> bool:
+    """The march's last 40 sections repeat to 1e-9 of their size at some order up to 4."""
+    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+    last = run["sections"][-40:] * scale
+    size = np.abs(last).max()
+    return any(np.abs(last[n:] - last[:-n]).max() <= 1e-9 * size for n in range(1, 5))
+
+
+def test_an_interrupted_study_resumes_to_the_same_fractions(fractions, tmp_path):
+    (tmp_path / "fractions.json").write_text((fractions / "fractions.json").read_text())
+    line = (fractions / "points.jsonl").read_text().splitlines(keepends=True)[0]
+    (tmp_path / "points.jsonl").write_text(line[:-20])  # killed while writing its only chunk
+    assert run_cli("fractions", *BAND, "--jobs", 1, "--confirm", 0, "--out", tmp_path, "--resume") == 0
+    first, again = open_dataset(fractions / "fractions.nc"), open_dataset(tmp_path / "fractions.nc")
+    assert list(again["attractor_name"].values) == list(first["attractor_name"].values)
+    assert np.array_equal(again["fraction"].values, first["fraction"].values)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--starts", "0"], ["--starts 0", "allowed range [1, inf)"]),
+    (["--starts", "-5"], ["--starts -5", "allowed range [1, inf)"]),
+    (["--count", "0"], ["--count 0", "allowed range [1, inf)"]),
+    (["--ratio-min", "1.3", "--ratio-max", "1.1"], ["--ratio-min 1.3 is not below --ratio-max 1.1"]),
+    (["--span", "0"], ["--span 0", "allowed range (0, inf) m"]),
+    (["--seed", "-1"], ["--seed -1", "allowed range [0, inf)"]),
+    (["--confirm", "-2"], ["--confirm -2", "allowed range [0, inf)"]),
+    (["--set", "d=-0.01"], ["d = -0.01 is not above 0"]),
+])
+def test_bad_fractions_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
+    out = tmp_path / "out"
+    assert_refused(capsys, "fractions", argv, words, "--out", out, "--fmu", FMU)
+    assert not (out / "points.jsonl").exists()
