@@ -1,5 +1,6 @@
-"""The bifurcation diagram (issue 23): section samples and impacts per cycle, up and down, every
-motion that does not settle classified; bad input refused before any run."""
+"""The bifurcation diagram (issues 23, 27): section samples and impacts per cycle, up and down, on the
+batch engine, every motion that does not settle classified, a sample of points checked through the
+FMU; bad input refused before any run."""
 
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
             assert 1 <= samples[where] <= 4  # an orbit of order n gives its n samples
             assert np.isnan(ds["lyapunov_exponent"].values[where])
         else:
-            assert samples[where] == 41
+            assert samples[where] == 40
             # An exponent, unless the impact mass was in contact at every section (chatter).
             assert np.isfinite(ds["lyapunov_exponent"].values[where]) == (motion[where] != "unclassified")
     # At w_n the default damper's motion is chaotic, sweeping either way (see tests/test_motion.py).
@@ -47,11 +48,21 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
     assert (diagram / "bifurcation.png").stat().st_size > 0
 
 
+def test_the_fmu_checked_every_kind_of_motion_the_diagram_shows_and_none_disagreed(diagram):
+    summary = json.loads((diagram / "summary.json").read_text())
+    checks = summary["fmu_checks"]
+    assert checks["disagree"] == 0 and checks["agree"] + checks["parted"] == checks["checked"]
+    shown = {kind for classes in summary["classes"].values() for kind in classes}
+    assert {c["motion"] for c in checks["points"] if c["verdict"] == "agrees"} == shown
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--ratio-min", "0"], ["--ratio-min 0", "allowed range (0, inf)"]),
     (["--ratio-min", "1.2", "--ratio-max", "1.1"], ["--ratio-min 1.2", "reversed range"]),
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
     (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
+    (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
+    (["--device", "gpu"], ["--device gpu", "CuPy"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -63,6 +63,15 @@ def positive(value: float, option: str, what: str, unit: str) -> float:
     return value
 
 
+def device(name: str, why_not) -> str:
+    """``--device NAME``, refused when ``why_not(NAME)`` (the batch engine's own test of the device)
+    says why it cannot run here."""
+    message = why_not(name)
+    if message:
+        raise UsageError(f"--device {name}: {message}")
+    return name
+
+
 def whole(value: int, option: str, lowest: int, what: str) -> int:
     if value < lowest:
         raise UsageError(f"{option} {value}: {what}; allowed range [{lowest}, inf)")

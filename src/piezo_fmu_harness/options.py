@@ -26,8 +26,9 @@ def common(sub, step_default: float, step_help: str) -> None:
     model_options(sub)
 
 
-def band_options(sub, defaults: dict) -> None:
-    """The harmonic base motion, the band of frequencies and the steady-state settings."""
+def band_options(sub, defaults: dict, newton: bool = True) -> None:
+    """The harmonic base motion, the band of frequencies and the steady-state settings (Newton's
+    iterations too, for the studies that shoot through the FMU)."""
     amplitude = sub.add_mutually_exclusive_group()
     amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
                            help="base displacement amplitude Y, m (default 1e-3)")
@@ -46,7 +47,8 @@ def band_options(sub, defaults: dict) -> None:
                                        f"{defaults['max_cycles']})"),
             ("--newton-iterations", int, "N", "Newton iterations per shooting attempt; 0 marches in time only "
                                               "(default 12)")):
-        sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+        if option != "--newton-iterations" or newton:
+            sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
 
 
 def results_folder(sub, name: str) -> None:
@@ -99,10 +101,16 @@ def many_start_options(sub, max_cycles: int, confirm: int, confirm_where: str) -
             ("--voltage-model", int, "N", "0, 1 or 2 (default 1)"),
             ("--samples", int, "N", "communication steps per forcing period (default 64)"),
             ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
-            ("--max-cycles", int, "N", f"forcing periods a start is marched at most (default {max_cycles})"),
-            ("--confirm", int, "N", f"starts checked through the FMU besides one per attractor, {confirm_where} "
-                                    f"(default {confirm})"),
-            ("--seed", int, "S", "seed of the random starts and of the FMU's sample (default 0)")):
+            ("--max-cycles", int, "N", f"forcing periods a start is marched at most (default {max_cycles})")):
         sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    batch_options(sub, confirm, confirm_where)
+
+
+def batch_options(sub, confirm: int, confirm_where: str) -> None:
+    """Where the batch engine runs, and how many of its answers the FMU checks."""
+    sub.add_argument("--confirm", type=int, default=None, metavar="N",
+                     help=f"starts checked through the FMU besides one per attractor, {confirm_where} (default {confirm})")
+    sub.add_argument("--seed", type=int, default=None, metavar="S",
+                     help="seed of the random starts and of the FMU's sample (default 0)")
     sub.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
                      help="where the batch engine runs: numpy on the CPU, or CuPy on a GPU (default cpu)")

@@ -27,12 +27,22 @@ import numpy as np
 from ..store import PointStore
 from .confirm import fmu_label
 
-#: Starts in a chunk.
-CHUNK = 1024
+#: Chunks a study's starts are split into (the batch engine is the faster a start the more starts
+#: it marches at once, and a few chunks a worker keep the workers busy to the end) ...
+CHUNKS = 8
+#: ... of at least this many starts.
+CHUNK = 512
 
 
-def chunks(count: int, size: int = CHUNK) -> list[list[int]]:
+def chunk_size(count: int) -> int:
+    """Starts in a chunk of a study of ``count`` starts (fixed by ``count`` alone: ``--resume``
+    finds the same chunks again)."""
+    return max(CHUNK, -(-count // CHUNKS))
+
+
+def chunks(count: int) -> list[list[int]]:
     """The start indices of each chunk."""
+    size = chunk_size(count)
     return [list(range(begin, min(begin + size, count))) for begin in range(0, count, size)]
 
 

@@ -13,7 +13,8 @@ harmonic base motion, with the same physics, in closed form between events:
 - :mod:`.ensemble`: :class:`Ensemble`, many trajectories marched period by period;
 - :mod:`.namespace`: numpy on the CPU, or CuPy on a GPU (the array API standard);
 - :mod:`.orbits`: Newton, verification and multipliers on the engine, the motion without impacts;
-- :mod:`.settle`: where each of many starts goes, by marching (the rule of issue 26).
+- :mod:`.settle`: where each of many starts goes, by marching (the rule of issue 26);
+- :mod:`.trajectories`: a motion's Lyapunov exponent and modulation, and a start's track.
 
 It is not part of the FMUs; the FMU stays the reference that the studies check it against.
 """
@@ -24,7 +25,8 @@ from ...model.parameters import Parameters
 from .drive import HarmonicHold
 from .ensemble import Ensemble
 from .namespace import DEVICES, device_error, namespace, to_numpy
-from .settle import SettleSettings, Settled, describe, settle, tracks
+from .settle import SettleSettings, Settled, describe, settle
+from .trajectories import tracks
 
 
 def damper(values: dict) -> Parameters:

@@ -35,6 +35,7 @@ from .drive import HarmonicHold
 from .ensemble import Ensemble
 from .namespace import to_numpy
 from .orbits import LinearOrbit, Orbit, OrbitFinder, free_for_ever, linear_orbit, scale_of
+from .trajectories import empty_measures, measure
 from .phases import BatchModel
 
 #: A trajectory is taken to be on its way to an orbit within this fraction of the orbit's size.
@@ -43,8 +44,6 @@ LINEAR_REACH = 0.05
 RATE_SLACK = 0.02
 #: Returns of a seed for Newton: within this fraction of the size, and shrinking.
 SEED_REACH = 0.1
-#: The companion of the Lyapunov exponent, relative to the state's size.
-COMPANION = 1e-8
 
 
 @dataclass(frozen=True)
@@ -91,8 +90,12 @@ class Settled:
     a motion that is not periodic, -2 for a trajectory the engine set aside; ``periods``: periods
     marched when the label was given (``max_cycles`` for the others); for the motions that are not
     periodic: ``exponent`` (1/period), ``modulation``, ``impacts_per_cycle``, ``amplitude``,
-    ``amplitude_min``, ``amplitude_max`` (m), NaN elsewhere; ``unstable``: orbits Newton found
-    that are not stable (never a label); ``cycles``: start-periods marched in all.
+    ``amplitude_min``, ``amplitude_max`` (m), NaN elsewhere, and ``samples``, ``p`` (m) at each
+    section of the window they were measured over; ``unstable``: orbits Newton found that are not
+    stable (never a label); ``cycles``: start-periods marched in all; ``final`` and ``final_sides``:
+    where each trajectory goes, at the section: the point of its orbit it was nearest when it got
+    its label, the motion without impacts with its impact mass where it rests, or, for a motion that
+    is not periodic, its state after the measuring window: where a sweep's next frequency starts.
     """
 
     labels: np.ndarray
@@ -101,6 +104,9 @@ class Settled:
     unstable: list
     measures: dict
     cycles: int = 0
+    final: np.ndarray = None
+    final_sides: np.ndarray = None
+    samples: np.ndarray = None
 
     def records(self) -> tuple[list[dict], list[dict]]:
         """JSON-safe: one record per start (``label``, ``periods`` and, for a motion that is not
@@ -139,9 +145,10 @@ def _finite(value) -> float | None:
 
 
 def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
-           device: str = "cpu", progress=None) -> Settled:
-    """March ``starts`` ((n, 4): ``p, p', q, q'``, free) under ``drives`` (one, or one per group)
-    to where each goes (see the module's text). ``progress(done, total)`` is called after each block."""
+           device: str = "cpu", progress=None, sides=None) -> Settled:
+    """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
+    ``drives`` (one, or one per group) to where each goes (see the module's text).
+    ``progress(done, total)`` is called after each block."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
     starts = np.asarray(starts, float)
     n = len(starts)
@@ -153,10 +160,13 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     scales = np.array([scale_of(d) for d in drives])
     state = _State(n, settings)
     quiet: dict[int, int] = {}
-    ens = Ensemble(params, drives, starts, groups, device=device, model=model)
+    sides = np.zeros(n) if sides is None else np.asarray(sides, float)
+    ens = Ensemble(params, drives, starts, groups, sides, device=device, model=model)
+    final, final_sides = starts.copy(), sides.copy()
     ids = np.arange(n)
     # A start may already be free for ever.
-    _label_quiet(state, model, linear, quiet, ids, groups, starts, np.zeros(n), 0)
+    _label_quiet(state, model, linear, quiet, ids, groups, starts, sides, 0)
+    _destinations(state, final, final_sides, ids[state.labels >= 0], starts[state.labels >= 0], scales)
     keep = state.labels[ids] == -1
     ens, ids = (ens.select(keep), ids[keep]) if not keep.all() else (ens, ids)
     history = None
@@ -176,13 +186,18 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
         _label_orbits(state, history, ids, g, scales, tolerance, marched)
         keep = state.labels[ids] == -1
         if not keep.all():
+            _destinations(state, final, final_sides, ids[~keep], record["sections"][-1][~keep], scales)
             ens, ids = ens.select(keep), ids[keep]
             history = {name: values[:, keep] for name, values in history.items()}
         if progress is not None:
             progress(n - len(ids), n)
     state.periods[ids] = marched
-    measures = _measure(ens, ids, n, scales, settings, finder) if len(ids) else _empty(n)
-    return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles)
+    samples = np.full((n, settings.classify_cycles), np.nan)
+    measures = empty_measures(n)
+    if len(ids):
+        final[ids], final_sides[ids], samples[ids] = measure(ens, ids, measures, scales, settings.classify_cycles, finder)
+    return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles, final,
+                   final_sides, samples)
 
 
 class _State:
@@ -194,16 +209,17 @@ class _State:
         self.settings = settings
 
 
-def tracks(params, drives, starts, groups, periods, device: str = "cpu") -> list[list[list[float]]]:
-    """The section states of each start (``(n, 4)``, free) over its first ``periods[j]`` periods,
-    JSON-safe: what a check through the FMU compares its own trajectory with."""
-    drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
-    periods = [int(k) for k in periods]
-    if not periods:
-        return []
-    ens = Ensemble(params, drives, np.asarray(starts, float), np.asarray(groups, int), device=device)
-    sections = ens.advance(max(max(periods), 1))["sections"]
-    return [[[float(v) for v in row] for row in sections[:k, j]] for j, k in enumerate(periods)]
+def _destinations(state, final, final_sides, chosen, sections, scales) -> None:
+    """Where the labelled trajectories ``chosen`` (now at ``sections``) go (see :class:`Settled`)."""
+    for j, x in zip(chosen, sections):
+        attractor = state.attractors[state.labels[j]]
+        if isinstance(attractor, Quiet):
+            final[j] = [*attractor.orbit.nodes[0], x[2], 0.0]
+            final_sides[j] = 0.0
+        else:
+            scale = scales[attractor.group]
+            k = int(np.abs((attractor.sections - x) * scale).max(axis=1).argmin())
+            final[j], final_sides[j] = attractor.sections[k], attractor.sides[k]
 
 
 def _extend(history, record, keep: int) -> dict:
@@ -327,52 +343,3 @@ def _known(orbits: list, orbit: Orbit, scales, tolerance) -> bool:
             if np.abs((other.sections - orbit.sections[0]) * scale).max(axis=1).min() <= 100 * tolerance[orbit.group]:
                 return True
     return False
-
-
-def _empty(n: int) -> dict:
-    return {name: np.full(n, np.nan) for name in ("exponent", "modulation", "impacts_per_cycle", "amplitude",
-                                                  "amplitude_min", "amplitude_max")}
-
-
-def _measure(ens: Ensemble, ids, n, scales, settings, finder) -> dict:
-    """Lyapunov exponent, modulation, impacts and amplitudes of the trajectories left: each is
-    marched beside a companion ``COMPANION`` of its size away, brought back to that distance
-    (along the same direction) after every period."""
-    measures = _empty(n)
-    m = len(ids)
-    states, sides, groups, volts = ens.states, ens.sides, ens.group, ens.voltages
-    direction = np.random.default_rng(0).standard_normal(4)
-    direction /= np.linalg.norm(direction)
-    scale = scales[groups]
-    delta = COMPANION * np.maximum(np.abs(states * scale).max(axis=1), 1e-300)
-    pair = Ensemble(ens.params, ens.drives, np.concatenate([states, states]), np.concatenate([groups, groups]),
-                    np.concatenate([sides, sides]), None if volts is None else np.concatenate([volts, volts], axis=1),
-                    ens.device, ens.model)
-    companions = np.arange(2 * m) >= m
-    logs = np.zeros(m)
-    tops, bottoms, counts = [], [], []
-    offset = direction[None] * delta[:, None] / scale
-    for _ in range(settings.classify_cycles):
-        pair.assign(companions, states + offset, sides, volts)
-        out = pair.advance(1, observe=True)
-        finder.cycles += 2 * m
-        now = pair.states
-        states, other = now[:m], now[m:]
-        sides, volts = pair.sides[:m], None if volts is None else pair.voltages[:, :m]
-        gap = np.linalg.norm((other - states) * scale, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logs += np.log(gap / delta)
-            offset = (other - states) * (delta / gap)[:, None]
-        tops.append(out["top"][0, :m])
-        bottoms.append(out["bottom"][0, :m])
-        counts.append(out["impacts"][0, :m])
-    swings = 0.5 * (np.array(tops) - np.array(bottoms))
-    largest = swings.max(axis=0)
-    measures["exponent"][ids] = logs / settings.classify_cycles
-    with np.errstate(divide="ignore", invalid="ignore"):
-        measures["modulation"][ids] = np.where(largest > 0, (largest - swings.min(axis=0)) / largest, 0.0)
-    measures["impacts_per_cycle"][ids] = np.array(counts).mean(axis=0)
-    measures["amplitude"][ids] = 0.5 * (np.array(tops).max(axis=0) - np.array(bottoms).min(axis=0))
-    measures["amplitude_min"][ids] = swings.min(axis=0)
-    measures["amplitude_max"][ids] = largest
-    return measures

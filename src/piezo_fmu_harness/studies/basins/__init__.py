@@ -61,7 +61,7 @@ def command(args) -> int:
     import shutil
     import time
 
-    from ...checks import PROG, open_model, positive, preflight, whole, worker_count
+    from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec, linear_transmissibility
     from ...periodic.many import backend_for, confirm, execute
     from . import study
@@ -89,7 +89,9 @@ def command(args) -> int:
         settings = band.settings
         spec = study.BasinSpec(ratio, omega, amplitude, {**parameters, **band.values}, p0, dp0, settings.samples,
                                settings.tolerance, settings.max_cycles, args.device, confirm_count, seed)
-        _check_device(args.device)
+        from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
+
+        device(args.device, device_error)
         folder, done, start_over = study.open_basins(model, spec, args.out, args.resume, args.force)
         backend = backend_for(args, model, unzipdir, instance, jobs)
         begin = time.perf_counter()
@@ -119,10 +121,3 @@ def command(args) -> int:
     print(f"  results in {folder}")
     return 0
 
-
-def _check_device(device: str) -> None:
-    from piezo_fmu.solver.batch import device_error
-    message = device_error(device)
-    if message:
-        from ...spec import UsageError
-        raise UsageError(f"--device {device}: {message}")

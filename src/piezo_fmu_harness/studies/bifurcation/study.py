@@ -1,18 +1,25 @@
-"""The bifurcation diagram (issue 23): at each frequency, after the transients, the Poincare
+"""The bifurcation diagram (issues 23, 27): at each frequency, after the transients, the Poincare
 (stroboscopic) samples of the main mass's displacement ``p`` and the impacts per cycle, swept up and
 down in frequency with the damper.
 
-Each frequency starts from the previous one's final state, as the frequency response's sweeps do,
-and its steady state is found the same way (:mod:`piezo_fmu_harness.periodic.steady_state`): a
-stable orbit of order ``n`` gives its ``n`` section samples; a motion that is not periodic gives
-the samples of its classification window (40 periods) and its class: quasi-periodic, strongly
-modulated, chaotic, or a transient still converging
-(:mod:`piezo_fmu_harness.periodic.motion`). The two sweeps are two tasks of the sweep engine.
+Each frequency starts from where the previous one's motion goes, as the frequency response's sweeps
+do, and is marched on the batch engine (``piezo_fmu.solver.batch``) until its own trajectory shows
+what it reaches (the rule of ``piezo_fmu.solver.batch.settle``): a stable orbit of order ``n``
+gives its ``n`` section samples, the motion without impacts its one; a motion that reaches no
+orbit within ``--max-cycles`` gives the samples of its measuring window (40 periods) and its
+class: quasi-periodic, strongly modulated, chaotic, or a transient still converging
+(:func:`piezo_fmu_harness.periodic.motion.kind`, from its largest Lyapunov exponent and
+modulation). The two sweeps are two tasks of the sweep engine.
+
+**The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
+of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
+diagram gives (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
 
 Files: ``bifurcation.nc`` (dims direction x omega x sample), ``bifurcation.csv`` (a row a sample),
-``summary.json`` (the classes and where), ``bifurcation.png``.
+``summary.json`` (the classes and where, the checks), ``bifurcation.png``.
 
-The harness reads nothing but the FMU: it never imports the simulation core.
+This study reads the simulation core's batch engine besides the FMU, which checks it: the one
+exception, with the basins and the fractions, to the harness's rule that it reads nothing but the FMU.
 """
 
 from __future__ import annotations
@@ -25,42 +32,103 @@ from pathlib import Path
 import numpy as np
 
 from ...datasets import bands
-from ...periodic.band import FrequencySpec, solve_chain
-from ...periodic.steady_state import Settings
+from ...periodic.band import FrequencySpec
+from ...periodic.motion import kind
 
 DIRECTIONS = ("up", "down")
 #: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), at most 200 cycles each.
 DEFAULTS = {"ratios": (0.5, 2.0), "count": 200, "max_cycles": 200, "fewest": 2}
 #: The classes of motion, in the order the summary lists them.
 CLASSES = ("periodic", "quasi-periodic", "strongly modulated", "chaotic", "transient", "unclassified", "error")
+#: Periods between two looks at a sweep's trajectory.
+BLOCK = 10
+#: Points the FMU checks besides one of each kind of motion.
+DEFAULT_CONFIRM = 6
 
 
 def sweep(instance, spec: dict, direction: str) -> dict:
-    """One sweep of the diagram (a task): each frequency's steady state from the previous state,
-    with its section samples of ``p`` (m)."""
+    """One sweep of the diagram (a task): each frequency from where the previous one's motion goes,
+    on the batch engine, with its section samples of ``p`` (m)."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, describe, settle
+
     ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
-    omegas = [ratio * spec["natural"] for ratio in ratios]
-    records = solve_chain(instance, [(spec["values"], omega, spec["amplitude"] if spec["amplitude"] is not None
-                                      else spec["acceleration"] / omega**2) for omega in omegas],
-                          Settings(**spec["settings"]))
+    params = damper(spec["values"])
+    settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
+                              block=BLOCK)
+    state, side = [0.0, 0.0, 0.0, 0.0], 0.0
     points = []
-    for ratio, record in zip(ratios, records):
-        points.append({"ratio": ratio, "status": record.get("status"), "motion": record.get("motion", "error"),
-                       "samples": [s[0] for s in record.get("sections") or []],
-                       "impacts_per_cycle": record.get("impacts_per_cycle"), "order": record.get("order"),
-                       "lyapunov_exponent": record.get("lyapunov_exponent"), "amplitude": record.get("amplitude"),
-                       "cpu_seconds": record.get("cpu_seconds")})
+    for ratio in ratios:
+        begin = time.process_time()
+        omega = ratio * spec["natural"]
+        amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
+        drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
+        settled = settle(params, drive, [state], settings=settings, device=spec["device"], sides=[side])
+        label = int(settled.labels[0])
+        point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
+                 "periods": int(settled.periods[0]), "status": "ok"}
+        if label >= 0:
+            attractor = describe(settled.attractors[label])
+            point.update(motion="periodic", attractor=attractor, samples=[row[0] for row in attractor["sections"]],
+                         impacts_per_cycle=attractor["impacts_per_cycle"], order=attractor["order"],
+                         amplitude=attractor["amplitude"], lyapunov_exponent=None)
+        elif label == -1:
+            m = {name: float(values[0]) for name, values in settled.measures.items()}
+            point.update(motion=kind(m["exponent"], m["modulation"]), attractor={"kind": "not periodic"},
+                         samples=settled.samples[0].tolist(), impacts_per_cycle=m["impacts_per_cycle"], order=None,
+                         amplitude=m["amplitude"], lyapunov_exponent=m["exponent"])
+        else:
+            point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
+                         order=None, amplitude=None, lyapunov_exponent=None)
+        point["cpu_seconds"] = time.process_time() - begin
+        points.append(point)
+        if label != -2:
+            state, side = [float(v) for v in settled.final[0]], float(settled.final_sides[0])
     return {"direction": direction, "points": points}
 
 
-def run(spec: FrequencySpec, backend) -> tuple[list[dict], float]:
+def run(spec: FrequencySpec, backend, device: str = "cpu") -> tuple[list[dict], float]:
     """Both sweeps on ``backend``; returns them (up first) and the wall time (s)."""
     begin = time.perf_counter()
     plain = {"values": spec.values, "settings": asdict(spec.settings), "ratios": list(spec.ratios),
-             "natural": spec.natural, "amplitude": spec.amplitude, "acceleration": spec.acceleration}
+             "natural": spec.natural, "amplitude": spec.amplitude, "acceleration": spec.acceleration, "device": device}
     results = [result for _, result in backend.run_tasks([(d, sweep, (plain, d)) for d in DIRECTIONS])]
     results.sort(key=lambda r: DIRECTIONS.index(r["direction"]))
     return results, time.perf_counter() - begin
+
+
+def checks(spec: FrequencySpec, sweeps: list[dict], backend, count: int, seed: int) -> list[dict]:
+    """The FMU's checks of a sample of points (see the module's text): one point of each kind of
+    motion (the class, and for an orbit its order and impacts per cycle) and ``count`` more drawn at
+    random (seeded), among the points whose start has the impact mass free (the FMU starts only so)."""
+    from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
+
+    from ...periodic.many import confirm_task
+
+    points = [(j, k, p) for j, s in enumerate(sweeps) for k, p in enumerate(s["points"])
+              if p["status"] == "ok" and p["start_side"] == 0.0]
+    chosen, kinds = [], set()
+    for j, k, p in points:
+        key = (p["motion"], p["order"], p["impacts_per_cycle"] if p["motion"] == "periodic" else None)
+        if key not in kinds:
+            kinds.add(key)
+            chosen.append((j, k))
+    rng = np.random.default_rng(seed)
+    rest = [(j, k) for j, k, _ in points if (j, k) not in chosen]
+    chosen += [rest[i] for i in sorted(rng.choice(len(rest), size=min(count, len(rest)), replace=False))]
+    params = damper(spec.values)
+    payloads = []
+    for j, k in chosen:
+        p = sweeps[j]["points"][k]
+        drive = HarmonicHold(p["omega"], p["amplitude_Y"], 0.0, spec.settings.samples)
+        attractor = {**p["attractor"], "id": 0, "group": 0}
+        payloads.append({"index": j * len(spec.ratios) + k, "values": spec.values, "omega": p["omega"],
+                         "amplitude": p["amplitude_Y"], "samples": spec.settings.samples, "start": p["start"],
+                         "periods": p["periods"], "track": tracks(params, drive, [p["start"]], [0], [p["periods"]])[0],
+                         "attractors": [attractor], "study": 0, "direction": sweeps[j]["direction"],
+                         "ratio": p["ratio"], "motion": p["motion"]})
+    results = {r["index"]: r for _, r in backend.run_tasks([(q["index"], confirm_task, (q,)) for q in payloads])}
+    return [{**results[q["index"]], "direction": q["direction"], "ratio": q["ratio"], "motion": q["motion"]}
+            for q in payloads]
 
 
 def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
@@ -93,9 +161,13 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
                "parameters": json.dumps(spec.values), "settings": json.dumps(asdict(spec.settings))})
 
 
-def summarize(ds, wall: float) -> dict:
+def summarize(ds, wall: float, checked: list[dict]) -> dict:
     ratios = ds["ratio"].values
-    report = {"wall_s": wall, "points": int(ds["motion"].size), "classes": {}}
+    verdicts = [c["verdict"] for c in checked]
+    report = {"wall_s": wall, "points": int(ds["motion"].size), "classes": {},
+              "fmu_checks": {"checked": len(checked), "agree": verdicts.count("agrees"),
+                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
+                             "points": checked}}
     for j, direction in enumerate(DIRECTIONS):
         motion = ds["motion"].values[j]
         report["classes"][direction] = {kind: {"count": int((motion == kind).sum()), "bands": bands(ratios, motion == kind)}
@@ -103,7 +175,7 @@ def summarize(ds, wall: float) -> dict:
     return report
 
 
-def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float) -> dict:
+def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float, checked: list[dict]) -> dict:
     from ...datasets import save_dataset
     from .figure import draw
 
@@ -112,7 +184,7 @@ def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float) ->
     frame = ds[["p_section"]].to_dataframe().dropna().reset_index()
     frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),
                 on=["direction", "omega"]).to_csv(folder / "bifurcation.csv", index=False)
-    report = summarize(ds, wall)
+    report = summarize(ds, wall, checked)
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     draw(ds, folder / "bifurcation.png")
     return report

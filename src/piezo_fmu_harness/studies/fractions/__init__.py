@@ -46,7 +46,7 @@ def command(args) -> int:
     import shutil
     import time
 
-    from ...checks import PROG, open_model, positive, preflight, whole, worker_count
+    from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec
     from ...periodic.many import backend_for, execute
     from . import study
@@ -60,7 +60,9 @@ def command(args) -> int:
     jobs = worker_count(args)
     unzipdir, instance = preflight(model, [{}], "--fmu")
     try:
-        _check_device(args.device)
+        from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
+
+        device(args.device, device_error)
         args.newton_iterations = None
         band = frequency_spec(args, model, instance, study.DEFAULTS)
         parameters = {**model.defaults(), **band.values}
@@ -95,10 +97,3 @@ def command(args) -> int:
     print(f"  results in {folder}")
     return 0
 
-
-def _check_device(device: str) -> None:
-    from piezo_fmu.solver.batch import device_error
-    message = device_error(device)
-    if message:
-        from ...spec import UsageError
-        raise UsageError(f"--device {device}: {message}")

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from ...periodic.attractors import merge, shares, track_names
-from ...periodic.many import CHUNK, confirm
+from ...periodic.many import chunk_size, confirm
 from ...store import open_folder
 
 HEADER_FILE = "fractions.json"
@@ -87,8 +87,9 @@ class FractionSpec:
         return np.stack([p0, self.span * self.natural * u[:, 1], p0 + half_gap * u[:, 2], np.zeros(self.starts)], axis=1)
 
     def chunks(self) -> list[list[int]]:
-        """The frequencies of each chunk (about :data:`CHUNK` starts each)."""
-        size = max(1, CHUNK // self.starts)
+        """The frequencies of each chunk (:func:`piezo_fmu_harness.periodic.many.chunk_size` starts
+        or a little more, whole frequencies)."""
+        size = max(1, -(-chunk_size(self.starts * len(self.ratios)) // self.starts))
         return [list(range(k, min(k + size, len(self.ratios)))) for k in range(0, len(self.ratios), size)]
 
     def to_dict(self) -> dict:
