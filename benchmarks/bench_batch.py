@@ -7,7 +7,7 @@
    middle) marched ``P`` periods on the batch engine (numpy on the CPU), and the first ``K`` of them
    marched ``P`` periods through the FMU (the harness's drive, fmpy); start-periods per second of
    each, and their ratio, ``speedup`` (target: >= 50 on 2 cores). On a machine with CuPy and a GPU,
-   the same starts on the GPU, and 10 times as many.
+   the same starts on the GPU (and how far its sections end from the CPU's), and 10 times as many.
 2. **Agreement.** The ``K`` starts are taken to where they go on the batch engine (the rule of
    ``piezo_fmu.solver.batch.settle``), and the FMU is marched from each until it shows which of
    those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when
@@ -60,14 +60,26 @@ def starts(count: int, omega: float) -> np.ndarray:
     return np.stack([p0, rng.uniform(-span * omega, span * omega, count), p0, np.zeros(count)], axis=1)
 
 
-def batch_rate(states: np.ndarray, drive: HarmonicHold, periods: int, device: str) -> dict:
+def batch_rate(states: np.ndarray, drive: HarmonicHold, periods: int, device: str, keep: list | None = None) -> dict:
     ens = Ensemble(Parameters(**VALUES), drive, states, device=device)
     ens.advance(1)  # first touch: imports, device kernels
     begin = time.perf_counter()
-    ens.advance(periods)
+    record = ens.advance(periods)
     wall = time.perf_counter() - begin
+    if keep is not None:
+        keep.append(record)
     return {"device": device, "starts": len(states), "periods": periods, "wall_s": wall,
             "start_periods_per_s": len(states) * periods / wall}
+
+
+def same_motion(cpu: dict, gpu: dict) -> dict:
+    """How far the GPU's sections are from the CPU's, the same starts marched the same periods, and
+    how many starts made the same contact onsets in every period."""
+    gap = np.abs(cpu["sections"] - gpu["sections"]).max(axis=(0, 2))
+    onsets = (cpu["impacts"] == gpu["impacts"]).all(axis=0)
+    return {"max_section_difference_m": float(gap.max()), "median_section_difference_m": float(np.median(gap)),
+            "starts_within_1e-9_m": int((gap <= 1e-9).sum()), "starts_same_onsets": int(onsets.sum()),
+            "starts": int(gap.size)}
 
 
 def fmu_rate(instance: Instance, states: np.ndarray, omega: float, periods: int) -> dict:
@@ -139,7 +151,8 @@ def main() -> int:
     instance = Instance(model, unzipdir)
     try:
         fmu = fmu_rate(instance, states[:args.fmu_starts], omega, args.periods)
-        cpu = batch_rate(states, drive, args.periods, "cpu")
+        marched: list = []
+        cpu = batch_rate(states, drive, args.periods, "cpu", marched)
         small = batch_rate(states[:args.fmu_starts], drive, args.periods, "cpu")
         report = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average_before": load,
                   "fmu": fmu, "batch_cpu": cpu, "batch_cpu_same_starts_as_fmu": small,
@@ -147,10 +160,11 @@ def main() -> int:
                   "speedup_same_starts": small["start_periods_per_s"] / fmu["start_periods_per_s"]}
         report.update(agreement(instance, states[:args.fmu_starts], omega))
         if device_error("gpu") is None:
-            gpu = batch_rate(states, drive, args.periods, "gpu")
+            gpu = batch_rate(states, drive, args.periods, "gpu", marched)
             big = batch_rate(starts(10 * args.starts, omega), drive, args.periods, "gpu")
             report["batch_gpu"] = gpu
             report["batch_gpu_10x"] = big
+            report["gpu_against_cpu"] = same_motion(*marched)
             report["gpu_speedup"] = gpu["start_periods_per_s"] / fmu["start_periods_per_s"]
             report["gpu_speedup_10x"] = big["start_periods_per_s"] / fmu["start_periods_per_s"]
         else:

@@ -54,9 +54,9 @@ def locate(xp, evaluate, g0, dg0, tol0, near, remaining, bounds):
     Parameters
     ----------
     evaluate : callable
-        ``(mask, t) -> (g, dg, tol)``: the event functions of the trajectories in ``mask`` (bool,
-        (L,)) at the times ``t`` (s from the phase start, one per trajectory in ``mask``): arrays
-        (k, count) for the ``k`` functions, their rates, and their rounding level (count,).
+        ``t -> (g, dg, tol)``: the event functions of the trajectories at the times ``t`` (s from
+        the phase start, one per trajectory): arrays (k, L) for the ``k`` functions, their rates,
+        and their rounding level (L,).
     g0, dg0 : (k, L) arrays
         The functions and their rates at the start; ``tol0`` (L,) their rounding level.
     near : (k, L) bool
@@ -74,33 +74,33 @@ def locate(xp, evaluate, g0, dg0, tol0, near, remaining, bounds):
         ``which`` (L,): the index of the function that fires; ``failed`` (L,): the location did not
         converge within ``MAX_ITERATIONS`` or met a value that is not finite (the caller sets such
         a trajectory aside).
+
+    The trajectories are few (those that may switch in a step), so every iteration works on all of
+    them, the finished ones held where they stopped.
     """
     k, L = g0.shape
     time = xp.full((L,), math.inf)
     which = xp.zeros((L,), dtype=xp.int64)
     failed = xp.zeros((L,), dtype=xp.bool)
-    searching = xp.ones((L,), dtype=xp.bool)
+    active = xp.ones((L,), dtype=xp.bool)
     g, dg, tol, held = xp.where(near, 0.0, g0), dg0, tol0, near
-    t, rem, bnd = xp.zeros((L,)), remaining, bounds
+    t = xp.zeros((L,))
     for _ in range(MAX_ITERATIONS):
         fired = (g >= -tol) & (dg > 0.0) & ~held
-        hit = xp.any(fired, axis=0)
+        hit = xp.any(fired, axis=0) & active
         # A function within rounding of 0 that does not fire (a touch heading inwards, or a start
         # value taken as 0 with no rate) steps on from just below zero.
         stalled = (g >= -tol) & ~fired
-        dt = xp.min(safe_step(xp, xp.where(stalled, -tol, xp.minimum(g, 0.0)), dg, bnd), axis=0)
-        after = t + dt
-        past = ~hit & (after >= rem)
-        bad = ~hit & ~past & ~xp.isfinite(after)
-        time[searching] = xp.where(hit, t, math.inf)
-        which[searching] = xp.where(hit, xp.argmax(xp.astype(fired, xp.int64), axis=0), 0)
-        failed[searching] = bad
-        going = ~(hit | past | bad)
-        searching[searching] = going
-        if not bool(xp.any(going)):
+        after = t + xp.min(safe_step(xp, xp.where(stalled, -tol, xp.minimum(g, 0.0)), dg, bounds), axis=0)
+        past = active & ~hit & (after >= remaining)
+        bad = active & ~hit & ~past & ~xp.isfinite(after)
+        time = xp.where(hit, t, time)
+        which = xp.where(hit, xp.argmax(xp.astype(fired, xp.int64), axis=0), which)
+        failed = failed | bad
+        active = active & ~(hit | past | bad)
+        if not bool(xp.any(active)):
             return time, which, failed
-        t, rem, bnd = after[going], rem[going], bnd[going]
-        g, dg, tol = evaluate(searching, t)
+        t = xp.where(active, after, t)
+        g, dg, tol = evaluate(t)
         held = xp.zeros(g.shape, dtype=xp.bool)
-    failed[searching] = True
-    return time, which, failed
+    return time, which, failed | active

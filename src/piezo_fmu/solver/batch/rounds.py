@@ -134,12 +134,11 @@ def _free_events(xp, model, u, du, w, dw, rem):
     now = near & (start > 0.0)
     bound = free.bound_rate * xp.sqrt(du * du + free.w2 * u * u)
 
-    def evaluate(mask, t):
-        uu, dd = free.apply(free.coefficients(xp, t), u[mask], du[mask])
-        rr = w[mask] + dw[mask] * t - uu
-        drr = dw[mask] - dd
-        return (xp.stack([rr - hg, -rr - hg]), xp.stack([drr, -drr]),
-                NOISE_ULPS * EPS * (xp.abs(uu) + xp.abs(w[mask] + dw[mask] * t) + hg))
+    def evaluate(t):
+        uu, dd = free.apply(free.coefficients(xp, t), u, du)
+        ww = w + dw * t
+        rr, drr = ww - uu, dw - dd
+        return xp.stack([rr - hg, -rr - hg]), xp.stack([drr, -drr]), NOISE_ULPS * EPS * (xp.abs(uu) + xp.abs(ww) + hg)
 
     time, which, failed = locate(xp, evaluate, g0, dg0, tol, near & ~now, _as_array(xp, rem, u), bound)
     immediate = xp.any(now, axis=0)
@@ -167,11 +166,10 @@ def _contact_events(ens, u, du, w, dw, s, volts, rem):
     bound = xp.sum(xp.abs(c) * ens._lam2, axis=1)
     lam = ens._lam
 
-    def evaluate(mask, t):
-        terms = c[mask] * xp.exp(lam * xp.astype(t, xp.complex128)[:, None])
-        sm = s[mask]
-        return (xp.stack([-sm * xp.real(xp.sum(terms, axis=1))]),
-                xp.stack([-sm * xp.real(xp.sum(terms * lam, axis=1))]), tol[mask])
+    def evaluate(t):
+        terms = c * xp.exp(lam * xp.astype(t, xp.complex128)[:, None])
+        return (xp.stack([-s * xp.real(xp.sum(terms, axis=1))]), xp.stack([-s * xp.real(xp.sum(terms * lam, axis=1))]),
+                tol)
 
     time, _, failed = locate(xp, evaluate, xp.stack([-delta]), xp.stack([-rate]), tol, xp.stack([near & ~now]),
                              _as_array(xp, rem, u), bound)
