@@ -10,9 +10,10 @@
    the same starts on the GPU (and how far its sections end from the CPU's), and 10 times as many.
 2. **Agreement.** The ``K`` starts are taken to where they go on the batch engine (the rule of
    ``piezo_fmu.solver.batch.settle``), and the FMU is marched from each until it shows which of
-   those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when
-   every FMU label equals the batch engine's, ``parted`` counts the starts whose FMU trajectory
-   left the batch engine's in a chaotic transient before either settled.
+   those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when no
+   FMU label differs from the batch engine's while their trajectories were together;
+   ``agreeing`` counts the equal labels, ``parted`` the starts whose FMU trajectory left the batch
+   engine's in a chaotic transient before the batch engine's answer was known.
 3. With ``--studies``: the studies that march many starts, through the command line, timed: the
    201 x 201 basin map at 1.2 sqrt(K/M) (target: 5 minutes on 2 cores), the default bifurcation
    diagram (200 frequencies up and down; target: 30 s) and the default fractions (61 frequencies x
@@ -96,23 +97,31 @@ def fmu_rate(instance: Instance, states: np.ndarray, omega: float, periods: int)
 
 
 def agreement(instance: Instance, states: np.ndarray, omega: float) -> dict:
-    """Where the starts go on the batch engine, and where the FMU marched from them goes."""
+    """Where the starts go on the batch engine, and where the FMU marched from them goes; a start
+    whose FMU trajectory left the batch engine's before the batch engine's answer was known (a
+    chaotic transient: ``piezo_fmu_harness.periodic.confirm``) counts as parted, not as agreeing."""
+    from piezo_fmu.solver.batch import tracks
     from piezo_fmu_harness.periodic.attractors import merge
 
-    settled = settle(Parameters(**VALUES), HarmonicHold(omega, Y), states, settings=SettleSettings())
+    params, drive = Parameters(**VALUES), HarmonicHold(omega, Y)
+    settled = settle(params, drive, states, settings=SettleSettings())
     records, attractors = settled.records()
     for index, record in enumerate(records):
         record.update(index=index, group=0)
     found, labelled = merge([{"starts": records, "attractors": attractors}], [(omega, Y)])
     listed = [{**a, "id": k} for k, a in enumerate(found)]
     values = {**instance.model.defaults(), **VALUES}
+    periods = [labelled[i]["periods"] for i in range(len(states))]
+    paths = tracks(params, drive, states, [0] * len(states), periods)
     verdicts = []
     for index, x in enumerate(states):
-        fmu = fmu_label(instance, values, omega, Y, 64, x, labelled[index]["periods"], listed)
-        verdicts.append(fmu["attractor"] == labelled[index]["attractor"])
-    names = [describe(a)["kind"] for a in settled.attractors]
-    return {"agree": all(verdicts), "agreeing": sum(verdicts), "checked": len(verdicts),
-            "batch_attractors": names}
+        fmu = fmu_label(instance, values, omega, Y, 64, x, periods[index], listed, paths[index])
+        same = fmu["attractor"] == labelled[index]["attractor"]
+        parted = fmu["diverged_at"] is not None and fmu["diverged_at"] <= periods[index]
+        verdicts.append("agrees" if same else "parted" if parted else "disagrees")
+    return {"agree": "disagrees" not in verdicts, "agreeing": verdicts.count("agrees"),
+            "parted": verdicts.count("parted"), "disagreeing": verdicts.count("disagrees"), "checked": len(verdicts),
+            "batch_attractors": [describe(a)["kind"] for a in settled.attractors]}
 
 
 def studies(jobs: int) -> dict:
