@@ -99,3 +99,29 @@ def reaches(run: dict, attractor: dict, omega: float, window: int = 40) -> bool:
     size = float(np.abs(points * scale).max())
     gap = np.abs((sections[-1][None] - points) * scale).max(axis=1).min()
     return bool(sorted(set(onsets.tolist())) == sorted(set(attractor["impacts"])) and gap <= 1e-3 * size)
+
+
+def settled(run: dict, omega: float, window: int = 40) -> bool:
+    """The march's last ``window`` sections repeat to 1e-9 of their size at some order up to 4."""
+    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+    last = run["sections"][-window:] * scale
+    size = np.abs(last).max()
+    return any(np.abs(last[n:] - last[:-n]).max() <= 1e-9 * size for n in range(1, 5))
+
+
+def ends_as_labelled(marcher: Marcher, values: dict, omega: float, amplitude: float, start, attractor: dict,
+                     periods: int) -> bool:
+    """Whether a start that a study labelled after ``periods`` periods ends on ``attractor`` when
+    marched with fmpy alone (200 periods more); or else whether its fate hangs on the last bits: the
+    same start moved by 1e-12 of itself parts from it by 1e-3 of the state's size within ``periods``
+    (a chaotic transient, whose end no double-precision code predicts). False otherwise."""
+    start = np.asarray(start, dtype=float)
+    run = marcher.march(values, omega, amplitude, start, periods + 200)
+    if attractor["kind"] == "not periodic":
+        return not settled(run, omega)
+    if reaches(run, attractor, omega):
+        return True
+    moved = marcher.march(values, omega, amplitude, start * (1 + 1e-12), periods)
+    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+    size = np.abs(run["sections"][:periods] * scale).max()
+    return bool(np.abs((moved["sections"] - run["sections"][:periods]) * scale).max() > 1e-3 * size)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmpy_march import Marcher, reaches
+from fmpy_march import Marcher, ends_as_labelled, reaches
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
@@ -92,10 +92,15 @@ def test_the_boundary_is_measured(summary):
     assert 0.0 < edge["basin_entropy"] <= edge["boundary_basin_entropy"] <= math.log(2) + 1e-12
 
 
-def test_the_study_had_the_fmu_check_every_attractor_and_it_agreed(summary):
+def test_the_study_had_the_fmu_check_every_attractor_and_none_disagreed(summary):
+    """Every attractor confirmed by the FMU from one of its starts; no check differing while the
+    FMU's trajectory and the batch engine's were together (a start whose two trajectories part in a
+    chaotic transient may end apart: that is not a disagreement, see tests/test_fractions.py)."""
     checks = summary["fmu_checks"]
-    assert checks["checked"] == checks["agree"] >= len(summary["attractors"]) + 10
-    assert {c["study"] for c in checks["starts"]} == {a["id"] for a in summary["attractors"]}
+    assert checks["disagree"] == 0 and checks["agree"] + checks["parted"] == checks["checked"]
+    assert checks["checked"] >= len(summary["attractors"]) + 10
+    agreed = {c["study"] for c in checks["starts"] if c["verdict"] == "agrees"}
+    assert agreed == {a["id"] for a in summary["attractors"]}
 
 
 def test_a_random_sample_of_starts_marched_with_fmpy_alone_ends_where_the_map_says(basins, summary, marcher):
@@ -105,9 +110,8 @@ def test_a_random_sample_of_starts_marched_with_fmpy_alone_ends_where_the_map_sa
         i, j = divmod(int(index), 15)
         p0, dp0 = float(ds["p0"].values[i]), float(ds["dp0"].values[j])
         attractor = label_of(basins, summary, int(index))
-        periods = int(ds["periods"].values[i, j]) + 200
-        run = marcher.march(values_of(basins), W, Y, (p0, dp0, p0, 0.0), periods)
-        assert reaches(run, attractor, W), (int(index), attractor["name"])
+        assert ends_as_labelled(marcher, values_of(basins), W, Y, (p0, dp0, p0, 0.0), attractor,
+                                int(ds["periods"].values[i, j])), (int(index), attractor["name"])
 
 
 def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_path):

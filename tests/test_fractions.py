@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmpy_march import Marcher, reaches
+from fmpy_march import Marcher, ends_as_labelled
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
 W_N = math.sqrt(1000.0)
 STARTS = 40
-BAND = ("--ratio-min", 1.15, "--ratio-max", 1.25, "--count", 3, "--starts", STARTS, "--fmu", FMU, "--no-progress")
+BAND = ("--ratio-min", 1.15, "--ratio-max", 1.25, "--count", 3, "--starts", STARTS, "--max-cycles", 300, "--fmu", FMU,
+        "--no-progress")
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +73,7 @@ def test_every_attractor_at_every_frequency_was_checked_by_the_fmu_and_none_disa
 
 def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_unpredictable(fractions):
     """Each sampled start, marched with fmpy alone, ends on the study's attractor; or else its fate is
-    shown to hang on the last bits: the same start moved by 1e-12 of its size parts from it (by
-    1e-3 of the size) before the study's answer was known."""
+    shown to hang on the last bits (:func:`fmpy_march.ends_as_labelled`)."""
     header = json.loads((fractions / "fractions.json").read_text())
     values = header["values"]
     u = np.random.default_rng(header["seed"]).uniform(-1.0, 1.0, (STARTS, 3))
@@ -85,30 +85,12 @@ def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_u
             chunk = next(c for c in chunks if f in c["frequencies"])
             record = next(r for r in chunk["starts"] if r["index"] == int(index))
             attractor = chunk["attractors"][record["label"]] if record["label"] >= 0 else {"kind": "not periodic"}
-            omega = header["ratios"][f] * W_N
             p0 = header["span"] * u[j, 0]
-            start = np.array([p0, header["span"] * W_N * u[j, 1], p0 + 0.5 * values["d"] * u[j, 2], 0.0])
-            periods = record["periods"] + 200
-            run = marcher.march(values, omega, header["amplitudes"][f], start, periods)
-            if attractor["kind"] == "not periodic":
-                assert not _settled(run, omega), int(index)
-                continue
-            if reaches(run, attractor, omega):
-                continue
-            moved = marcher.march(values, omega, header["amplitudes"][f], start * (1 + 1e-12), record["periods"])
-            scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
-            size = np.abs(run["sections"][:record["periods"]] * scale).max()
-            assert np.abs((moved["sections"] - run["sections"][:record["periods"]]) * scale).max() > 1e-3 * size
+            start = (p0, header["span"] * W_N * u[j, 1], p0 + 0.5 * values["d"] * u[j, 2], 0.0)
+            assert ends_as_labelled(marcher, values, header["ratios"][f] * W_N, header["amplitudes"][f], start,
+                                    attractor, record["periods"]), int(index)
     finally:
         marcher.close()
-
-
-def _settled(run: dict, omega: float) -> bool:
-    """The march's last 40 sections repeat to 1e-9 of their size at some order up to 4."""
-    scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
-    last = run["sections"][-40:] * scale
-    size = np.abs(last).max()
-    return any(np.abs(last[n:] - last[:-n]).max() <= 1e-9 * size for n in range(1, 5))
 
 
 def test_an_interrupted_study_resumes_to_the_same_fractions(fractions, tmp_path):
