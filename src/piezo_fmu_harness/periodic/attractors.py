@@ -166,33 +166,44 @@ def base_name(attractor: dict) -> str:
     return attractor["kind"]
 
 
-def track_names(found: list[dict], groups: list[int]) -> list[str]:
-    """A name for each attractor that keeps across the drives ``groups`` (in band order): attractors
-    of one kind present at one frequency are told apart by amplitude (#1 the largest), and matched
-    to the previous frequency's of the same kind by the nearest amplitude."""
+def _signature(attractor: dict, omega: float) -> np.ndarray:
+    """What a track of attractors is followed by from one frequency to the next: an orbit's section
+    states (scaled to metres, sorted), else its amplitude."""
+    if attractor["kind"] == "orbit":
+        scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
+        points = np.array(attractor["sections"], dtype=float) * scale
+        return points[np.lexsort(points.T[::-1])].ravel()
+    return np.array([attractor.get("amplitude") or 0.0])
+
+
+def track_names(found: list[dict], groups: list[int], omegas: list[float]) -> list[str]:
+    """A name for each attractor that keeps across the drives ``groups`` (in band order, at the
+    frequencies ``omegas``): each kind's base name (:func:`base_name`), and for the second and later
+    attractors of one kind ``#2``, ``#3`` (an orbit and its mirror image, or two branches); an
+    attractor takes the name of the previous frequency's of its kind whose section states (or
+    amplitude) lie nearest to its own."""
     names = [""] * len(found)
-    previous: dict[str, list[tuple[str, float]]] = {}
-    for group in groups:
-        members = [k for k, a in enumerate(found) if a["group"] == group]
-        now: dict[str, list[tuple[str, float]]] = {}
+    last: dict[str, dict[str, np.ndarray]] = {}  # base name -> track name -> its latest signature
+    for group, omega in zip(groups, omegas):
         by_kind: dict[str, list[int]] = {}
-        for k in members:
-            by_kind.setdefault(base_name(found[k]), []).append(k)
-        for base, ks in by_kind.items():
-            ks.sort(key=lambda k: -(found[k].get("amplitude") or 0.0))
-            earlier = list(previous.get(base, []))
-            taken: list[str] = []
-            for rank, k in enumerate(ks):
-                amplitude = found[k].get("amplitude") or 0.0
-                free = [(name, a) for name, a in earlier if name not in taken]
-                if free:
-                    name = min(free, key=lambda item: abs(math.log(max(amplitude, 1e-300) / max(item[1], 1e-300))))[0]
-                else:
-                    used = {n for n in taken} | {n for n, _ in earlier}
-                    name = base if len(ks) == 1 and base not in used else next(
-                        f"{base} #{i}" for i in range(2, len(ks) + len(used) + 3) if f"{base} #{i}" not in used)
-                taken.append(name)
+        for k, attractor in enumerate(found):
+            if attractor["group"] == group:
+                by_kind.setdefault(base_name(attractor), []).append(k)
+        for base, members in by_kind.items():
+            tracks = last.setdefault(base, {})
+            signatures = {k: _signature(found[k], omega) for k in members}
+            pairs = sorted((float(np.abs(signatures[k] - sig).max()) if sig.shape == signatures[k].shape else np.inf,
+                            k, name) for k in members for name, sig in tracks.items())
+            taken: dict[int, str] = {}
+            for _, k, name in pairs:
+                if k not in taken and name not in taken.values():
+                    taken[k] = name
+            for k in sorted(members):
+                if k not in taken:
+                    used = set(tracks) | set(taken.values())
+                    taken[k] = base if base not in used else next(f"{base} #{i}" for i in range(2, len(used) + 3)
+                                                                  if f"{base} #{i}" not in used)
+            for k, name in taken.items():
                 names[k] = name
-                now.setdefault(base, []).append((name, amplitude))
-        previous.update(now)
+                tracks[name] = signatures[k]
     return names

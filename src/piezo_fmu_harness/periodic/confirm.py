@@ -43,7 +43,7 @@ WINDOW = 40
 #: The distance to an orbit at the end of the window, relative to the orbit's size.
 REACH = 0.05
 #: Periods the FMU marches beyond the study, at most, before the motion counts as not periodic.
-EXTRA = 200
+EXTRA = 100
 #: Two trajectories have parted when their sections differ by this fraction of the state's size.
 PART = 1e-3
 

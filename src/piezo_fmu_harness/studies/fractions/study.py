@@ -193,7 +193,7 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
     from ...datasets import save_dataset
     from .figure import draw
 
-    names = track_names(found, list(range(len(spec.ratios))))
+    names = track_names(found, list(range(len(spec.ratios))), spec.omegas.tolist())
     ds = build_dataset(spec, found, starts, names)
     save_dataset(ds, folder / "fractions.nc")
     frame = ds[["fraction", "fraction_low", "fraction_high", "amplitude", "impacts_per_cycle"]].to_dataframe()
