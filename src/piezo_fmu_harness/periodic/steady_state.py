@@ -232,7 +232,7 @@ class Shooting:
             if first <= 0.0 or last >= first:
                 continue
             ratio = (last / first) ** (1.0 / (len(returns) - 1))
-            if last * ratio / (1.0 - ratio) + last <= self.tolerance:
+            if ratio < 1.0 and last * ratio / (1.0 - ratio) + last <= self.tolerance:
                 return order
         return None
 
