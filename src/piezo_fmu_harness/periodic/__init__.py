@@ -6,6 +6,8 @@ frequency response, the continuation, the optimiser's forced objective):
 - :mod:`.steady_state`: the steady state at one frequency, a stable orbit or a motion that is not
   periodic, found as :mod:`.settings` says;
 - :mod:`.stability`: the Floquet multipliers of an orbit;
+- :mod:`.attraction`: whether the trajectory goes to the orbit Newton found (the response is the
+  motion a start's trajectory reaches);
 - :mod:`.band`: a band of frequencies as the options ask for it, and one frequency's steady state as
   a task of the sweep engine.
 """
