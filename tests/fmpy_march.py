@@ -45,15 +45,18 @@ class Marcher:
             else:
                 self.fmu.setReal([v.valueReference], [float(value)])
 
-    def march(self, values: dict, omega: float, amplitude: float, start, periods: int, samples: int = 64) -> dict:
-        """``periods`` forcing periods from ``start`` (``p, p', q, q'``): the state at the end of
-        each period, the contact onsets in each, and the largest and smallest sampled ``p`` of each."""
+    def march(self, values: dict, omega: float, amplitude: float, start, periods: int, samples: int = 64,
+              phase: float = 0.0) -> dict:
+        """``periods`` forcing periods from ``start`` (``p, p', q, q'``) at base phase ``phase``
+        (rad): the state at the end of each period (``sections``), the contact onsets in each
+        (``onsets``), the largest and smallest sampled ``p`` of each (``top``, ``bottom``), and
+        ``p`` and ``p'`` after every step, the start first (``p``, ``dp``), ``h`` s apart."""
         if self.started:
             self.fmu.reset()
         self.started = True
         n = samples
         h = 2.0 * math.pi / omega / n
-        nodes = [amplitude / (math.sin(math.pi / n) / (math.pi / n)) ** 2 * math.sin(2.0 * math.pi * k / n)
+        nodes = [amplitude / (math.sin(math.pi / n) / (math.pi / n)) ** 2 * math.sin(phase + 2.0 * math.pi * k / n)
                  for k in range(n + 1)]
         slopes = [(nodes[k + 1] - nodes[k]) / h for k in range(n)]
         self.fmu.setupExperiment(startTime=0.0)
@@ -66,6 +69,7 @@ class Marcher:
         inputs = [self.variables["base_displacement"].valueReference, self.variables["base_velocity"].valueReference]
         count_ref = [self.variables["impact_count"].valueReference]
         sections, onsets, tops, bottoms = [], [], [], []
+        trace = [self.fmu.getReal(refs[:2])]
         count = self.fmu.getInteger(count_ref)[0]
         step = 0
         for _ in range(periods):
@@ -74,15 +78,18 @@ class Marcher:
                 self.fmu.setReal(inputs, [nodes[k], slopes[k]])
                 self.fmu.doStep(currentCommunicationPoint=step * h, communicationStepSize=(step + 1) * h - step * h)
                 step += 1
-                p_values.append(self.fmu.getReal(refs[:1])[0])
+                trace.append(self.fmu.getReal(refs[:2]))
+                p_values.append(trace[-1][0])
             sections.append(self.fmu.getReal(refs))
             now = self.fmu.getInteger(count_ref)[0]
             onsets.append(now - count)
             count = now
             tops.append(max(p_values))
             bottoms.append(min(p_values))
+        trace = np.array(trace)
         return {"sections": np.array(sections), "onsets": np.array(onsets), "top": np.array(tops),
-                "bottom": np.array(bottoms)}
+                "bottom": np.array(bottoms), "p": trace[:, 0], "dp": trace[:, 1], "h": h,
+                "impacts": [int(i) for i in onsets]}
 
 
 def reaches(run: dict, attractor: dict, omega: float, window: int = 40) -> bool:
@@ -125,3 +132,31 @@ def ends_as_labelled(marcher: Marcher, values: dict, omega: float, amplitude: fl
     scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
     size = np.abs(run["sections"][:periods] * scale).max()
     return bool(np.abs((moved["sections"] - run["sections"][:periods]) * scale).max() > 1e-3 * size)
+
+
+def march(fmu_path, values: dict, omega: float, amplitude: float, x, phase: float, periods: int,
+          samples: int = 64) -> dict:
+    """:meth:`Marcher.march` on a fresh instance of the FMU at ``fmu_path``, freed after."""
+    marcher = Marcher(fmu_path)
+    try:
+        return marcher.march(values, omega, amplitude, x, periods, samples, phase)
+    finally:
+        marcher.close()
+
+
+def half_swing(p: np.ndarray, dp: np.ndarray, h: float) -> float:
+    """Half the peak-to-peak of the main mass over samples ``p`` (with velocities ``dp``), ``h``
+    apart: each extreme sample refined by the parabola through it and its neighbours, whose vertex
+    is where the velocity, interpolated linearly, vanishes."""
+    def extreme(k: int) -> float:
+        k = min(max(k, 1), len(p) - 2)
+        a, b, c = dp[k - 1], dp[k], dp[k + 1]
+        # The velocity crosses zero between k-1 and k+1: its linear interpolant's root.
+        lo, hi = (k - 1, k) if a * b <= 0 else (k, k + 1)
+        va, vb = dp[lo], dp[hi]
+        s = va / (va - vb) if va != vb else 0.0
+        # p at the root: the integral of the linear velocity from sample lo.
+        return float(p[lo] + h * s * (va + 0.5 * s * (vb - va)))
+
+    top, bottom = extreme(int(np.argmax(p))), extreme(int(np.argmin(p)))
+    return 0.5 * (top - bottom)

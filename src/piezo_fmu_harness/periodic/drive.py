@@ -110,10 +110,11 @@ class HarmonicDrive:
         except FMICallException as error:
             raise self.instance.failure(error) from None
 
-    def advance(self, periods: int, record: Optional[list] = None) -> list[np.ndarray]:
+    def advance(self, periods: int, record: Optional[list] = None, counts: Optional[list] = None) -> list[np.ndarray]:
         """Simulate ``periods`` forcing periods; return the section state at the end of each.
 
-        With ``record`` (a list), append the state ``x`` after every step to it.
+        With ``record`` (a list), append the state ``x`` after every step to it; with ``counts``,
+        the ``impact_count`` after every step.
         """
         fmu, call = self.fmu, self.fmu.fmi2DoStep
         component = fmu.component
@@ -134,6 +135,9 @@ class HarmonicDrive:
                     if record is not None:
                         get_real(component, state_refs, 4, state)
                         record.append(state[:])
+                    if counts is not None:
+                        fmu.fmi2GetInteger(component, self._count_ref, 1, self._count_value)
+                        counts.append(int(self._count_value[0]))
                 get_real(component, state_refs, 4, state)
                 sections.append(np.array(state[:]))
                 self.cycles += 1

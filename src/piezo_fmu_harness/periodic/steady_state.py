@@ -23,6 +23,15 @@ eigenvector by ``ESCAPE_STEP`` of its size, on one side and then the other, and 
 Newton look again for a stable orbit of order 1 to ``max_order`` (an orbit already known is not
 examined twice). Each side gets half of the cycles left.
 
+**Only an orbit the trajectory goes to.** Newton from a marched state converges to any stable
+orbit near it, one the trajectory may never reach (the orbit without impacts is a neutral family,
+and least squares along the free impact mass's drift land on it from a motion that still
+impacts). So a stable orbit Newton finds is reported only once the march from Newton's start is
+shown to be attracted to it (:mod:`piezo_fmu_harness.periodic.attraction`: the orbit's impacts in
+every marched period, the distance to it shrinking as its multipliers say); otherwise it is
+remembered as rejected, and marching goes on. An orbit found by marching alone is the
+trajectory's own and needs no such check.
+
 **Not periodic.** When the cap on simulated cycles is reached with no stable orbit, the motion is
 reported as not periodic, with measures over a window of ``window_cycles`` forcing periods marched
 on from where the search stood: the amplitude envelope (the smallest and largest half peak-to-peak
@@ -36,67 +45,16 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from .attraction import Attractions
 from .drive import HarmonicDrive, measure
 from .motion import classify
+from .settings import Settings
 from ..fmu import FmuRunError
 from .stability import Floquet, Orbit, floquet
-
-
-@dataclass(frozen=True)
-class Settings:
-    """How one frequency's steady state is found and checked.
-
-    Attributes
-    ----------
-    samples : int
-        Communication steps per forcing period (the base's nodes), >= 16.
-    tolerance : float
-        Steady-state tolerance on the section's return, relative to the base amplitude ``Y``.
-    max_cycles : int
-        Cap on the forcing cycles simulated for one frequency (Newton's evaluations, the
-        stability checks and the search for a stable orbit included).
-    newton_iterations : int
-        Newton iterations per attempt; 0 finds the steady state by time-marching alone.
-    max_order : int
-        Longest period of an orbit looked for, in forcing periods.
-    warmup_cycles : int
-        Forcing cycles marched from the guess before the first Newton attempt (the last one
-        chooses the section's phase).
-    march_cycles : int
-        Forcing cycles marched between Newton attempts.
-    window_cycles : int
-        Forcing cycles over which a motion that is not periodic is measured.
-    classify_cycles : int
-        Forcing cycles after the window over which such a motion is classified
-        (:mod:`piezo_fmu_harness.periodic.motion`).
-    """
-
-    samples: int = 64
-    tolerance: float = 1e-6
-    max_cycles: int = 400
-    newton_iterations: int = 12
-    max_order: int = 4
-    warmup_cycles: int = 2
-    march_cycles: int = 8
-    window_cycles: int = 60
-    classify_cycles: int = 40
-
-    #: Newton attempts per search: at its start, then after 1, 3, 7, ... blocks of marching (a
-    #: transient that decays slowly, as at zeta = 0.0016, gets late attempts near its end).
-    NEWTON_ATTEMPTS = 6
-    #: Finite-difference step of Newton's Jacobian, relative to the state's scale.
-    FD_STEP = 1e-7
-    #: Returns the verification run checks, in orbits.
-    VERIFY_ORBITS = 3
-    #: Displacement of an unstable orbit along its unstable eigenvector, relative to its size.
-    ESCAPE_STEP = 1e-2
-    #: Unstable orbits the search escapes from, at most, per frequency.
-    MAX_ESCAPES = 4
 
 
 class Shooting:
@@ -111,6 +69,7 @@ class Shooting:
         self.unstable: list[Orbit] = []
         self.stability_cycles = 0  # cycles spent on the multipliers
         self.escape_cycles = 0  # cycles spent searching on from unstable orbits
+        self.attractions = Attractions(drive, self.tolerance)  # Newton's orbits against the march
 
     def _budget_left(self, periods: int) -> bool:
         return self.drive.cycles + periods <= self.limit
@@ -232,7 +191,7 @@ class Shooting:
             if first <= 0.0 or last >= first:
                 continue
             ratio = (last / first) ** (1.0 / (len(returns) - 1))
-            if last * ratio / (1.0 - ratio) + last <= self.tolerance:
+            if ratio < 1.0 and last * ratio / (1.0 - ratio) + last <= self.tolerance:
                 return order
         return None
 
@@ -261,8 +220,9 @@ class SteadyState(Shooting):
 
     def _search(self, history: list) -> Optional[Orbit]:
         """March from the drive's state (``history``: the sections so far, the drive at the last)
-        with Newton attempts between blocks, until a stable orbit is verified (returned), a new
-        unstable one is (kept; ``None``), or the cycles up to ``self.limit`` are spent (``None``)."""
+        with Newton attempts between blocks, until a stable orbit is verified and the march shown
+        to go there (returned), a new unstable one is verified (kept; ``None``), or the cycles up
+        to ``self.limit`` are spent (``None``)."""
         drive, settings = self.drive, self.settings
         verify = settings.VERIFY_ORBITS
         attempts, begin = 0, drive.cycles
@@ -272,20 +232,26 @@ class SteadyState(Shooting):
             if (settings.newton_iterations > 0 and attempts < settings.NEWTON_ATTEMPTS and due
                     and drive.clearance(x) > 0):
                 attempts += 1
-                saved = drive.save()
+                saved, ahead = drive.save(), None
                 try:
                     for order in self._orders(history):
                         candidate, converged = self.newton(x, phase, order)
-                        if converged and not self._known(candidate, phase) and self._budget_left(verify * order):
-                            drive.start(candidate, phase)
-                            sections = drive.advance(verify * order)
-                            period, error = self.returns(candidate, sections, order)
-                            if period is not None:
-                                orbit = self._examine(candidate, phase, period, sections, error, "newton")
-                                return orbit if orbit.floquet.stable else None
-                    drive.restore(saved)
+                        orbit = self._newton_orbit(candidate, phase, order) if converged else None
+                        if orbit is not None and not orbit.floquet.stable:
+                            return None
+                        if orbit is not None:  # stable: reported only if the march from x goes there
+                            verdict = self.attractions.check(orbit, saved, self.limit)
+                            if verdict.attracted:
+                                return orbit
+                            if ahead is None:  # marching goes on from where that march ended
+                                ahead = drive.save(), verdict.sections
+                    drive.restore(ahead[0] if ahead else saved)
+                    history += ahead[1] if ahead else []
                 finally:
                     drive.release(saved)
+                    if ahead:
+                        drive.release(ahead[0])
+                x = history[-1]
             order = self._marched_order(history)
             if order is not None and self._budget_left(verify * order):
                 # Verified by marching on: the next orbits must return within the tolerance.
@@ -299,7 +265,22 @@ class SteadyState(Shooting):
             block = min(settings.march_cycles, self.limit - drive.cycles)
             if block <= 0:
                 return None
-            history += drive.advance(block)
+            watched = self.attractions.watch(self.limit)  # the block, as a check of the orbits rejected
+            if watched is not None and watched[0] is not None:
+                return watched[0]
+            history += watched[1] if watched is not None else drive.advance(block)
+
+    def _newton_orbit(self, candidate, phase: float, order: int) -> Optional[Orbit]:
+        """The orbit through Newton's converged ``candidate``: one rejected before (not verified
+        again), or a new one verified and examined; ``None`` if it is a known unstable orbit, the
+        cap on cycles is near, or it does not return."""
+        orbit = self.attractions.known(candidate, phase)
+        if orbit is not None or self._known(candidate, phase) or not self._budget_left(self.settings.VERIFY_ORBITS * order):
+            return orbit
+        self.drive.start(candidate, phase)
+        sections = self.drive.advance(self.settings.VERIFY_ORBITS * order)
+        period, error = self.returns(candidate, sections, order)
+        return None if period is None else self._examine(candidate, phase, period, sections, error, "newton")
 
     def _examine(self, x, phase: float, period: int, sections: list, error: float, method: str) -> Orbit:
         """Measure the verified orbit through ``x`` (the drive stands at one of its sections) and
@@ -384,5 +365,6 @@ class SteadyState(Shooting):
         on top), the unstable orbits met, and where it stands: the next frequency's guess."""
         return {"cycles": self.drive.cycles, "newton_iterations": self.newton_iterations_used,
                 "stability_cycles": self.stability_cycles, "escape_cycles": self.escape_cycles,
+                "attraction_cycles": self.attractions.cycles, "rejected_orbits": self.attractions.records(),
                 "unstable_orbits": [orbit.record() for orbit in self.unstable],
                 "state": [float(v) for v in x], "phase": float(phase)}
