@@ -24,7 +24,6 @@ from piezo_fmu_harness.circuit import circuit_constants
 from piezo_fmu_harness.periodic.attraction import follows
 from piezo_fmu_harness.periodic.band import DEFAULT_AMPLITUDE, DEFAULT_VOLTAGE_MODEL, linear_transmissibility, solve_point
 from piezo_fmu_harness.periodic.steady_state import Settings, Shooting
-from piezo_fmu_harness.studies.basins.study import DEFAULT_COUNT, DEFAULT_SPAN, BasinSpec
 
 FMU = Path(__file__).resolve().parent.parent / "fmus" / "PiezoImpactDamper.fmu"
 RATIO, Y = 1.2, DEFAULT_AMPLITUDE
@@ -32,17 +31,19 @@ RATIO, Y = 1.2, DEFAULT_AMPLITUDE
 
 @pytest.fixture(scope="module")
 def case(instance) -> SimpleNamespace:
-    """The basin map's defaults at 1.2 w_n, as ``piezo-fmu basins --ratio 1.2`` sets them: the
-    voltage model 1, the load ``1/(omega_c C_p)`` to 6 digits, ``Y`` = 1 mm."""
+    """The basin map's settings at 1.2 w_n, as ``piezo-fmu basins --ratio 1.2`` sets them: the
+    voltage model 1, the load ``1/(omega_c C_p)`` to 6 digits, ``Y`` = 1 mm; and issue 23's grid of
+    15 x 15 starts, two linear amplitudes either way, row-major over ``p0 x p0'``."""
     values = {"voltage_model": DEFAULT_VOLTAGE_MODEL}
     values["R_load"] = float(f"{circuit_constants(instance, values)['R_opt_estimate_ohm']:.6g}")
     parameters = {**instance.model.defaults(), **values}
     M, K, C = parameters["M"], parameters["K"], parameters["C"]
     omega = RATIO * math.sqrt(K / M)
     linear = Y * float(linear_transmissibility(omega, M, K, C))
-    span = DEFAULT_SPAN * linear
-    spec = BasinSpec(RATIO, omega, Y, values, (-span, span, DEFAULT_COUNT), (-span * omega, span * omega, DEFAULT_COUNT))
-    return SimpleNamespace(values=values, omega=omega, linear=linear, grid=spec.grid(), M=M, K=K, C=C)
+    span = 2.0 * linear
+    p0, dp0 = np.linspace(-span, span, 15), np.linspace(-span * omega, span * omega, 15)
+    grid = [(i * 15 + j, float(p), float(v)) for i, p in enumerate(p0) for j, v in enumerate(dp0)]
+    return SimpleNamespace(values=values, omega=omega, linear=linear, grid=grid, M=M, K=K, C=C)
 
 
 def settled_at_the_end(plain, omega: float) -> float:
