@@ -11,7 +11,7 @@ PIP    := $(BIN)/python -m pip install -q --disable-pip-version-check
 STAMP      := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: nominal test docs dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced frequency-response clean
+.PHONY: nominal test docs dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced bench-batch frequency-response clean
 
 $(STAMP): pyproject.toml
 	@echo "installing piezo-fmu into $(VENV) ..."
@@ -92,7 +92,7 @@ hosts: system-deps $(TEST_STAMP)
 fmu-check: system-deps $(TEST_STAMP)
 	$(BIN)/python -m piezo_fmu.build --check
 
-bench: bench-core bench-fmu bench-sweep bench-me bench-forced
+bench: bench-core bench-fmu bench-sweep bench-me bench-forced bench-batch
 
 bench-core: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
@@ -108,6 +108,9 @@ bench-me: $(STAMP)
 
 bench-forced: $(STAMP)
 	$(BIN)/python benchmarks/bench_forced.py
+
+bench-batch: $(STAMP)
+	$(BIN)/python benchmarks/bench_batch.py
 
 clean:
 	rm -rf $(VENV) results build dist

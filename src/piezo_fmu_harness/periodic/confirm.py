@@ -61,12 +61,13 @@ def _orbit_rule(sections: np.ndarray, onsets: np.ndarray, sides: np.ndarray, orb
 
 
 def fmu_label(instance, values: dict, omega: float, amplitude: float, samples: int, start, periods: int,
-              attractors: list[dict], track=None, classify_cycles: int = 40) -> dict:
+              attractors: list[dict], track=None, cap: int = 0, classify_cycles: int = 40) -> dict:
     """March the FMU from ``start`` (``p, p', q, q'``) and say which of ``attractors`` (records of
     this drive, each with its ``id``) its trajectory reaches (see the module's text). Returns
     ``{"attractor": id or None, "motion", "periods", "diverged_at"}`` (``motion`` the class when not
     periodic; ``diverged_at`` the first period where the FMU's sections part from ``track``, the
-    study's, or None)."""
+    study's, or None). The FMU marches :data:`EXTRA` periods past the study's ``periods``, and at
+    least the study's own cap on periods ``cap``, before its motion counts as not periodic."""
     drive = HarmonicDrive(instance, values, omega, amplitude, samples)
     drive.start(np.asarray(start, float), 0.0)
     scale = drive.scale
@@ -74,7 +75,7 @@ def fmu_label(instance, values: dict, omega: float, amplitude: float, samples: i
     count = drive.totals()[0]
     track = None if track is None else np.asarray(track, float)
     diverged = None
-    limit = max(periods, WINDOW) + EXTRA
+    limit = max(max(periods, WINDOW) + EXTRA, cap)
     marched = 0
     while marched < limit:
         target = max(periods, WINDOW) if marched < max(periods, WINDOW) else marched + WINDOW // 2

@@ -108,7 +108,8 @@ def confirm_task(instance, payload: dict) -> dict:
     """A task: the FMU's label for one start (``payload``: the drive, the start, the periods the
     study marched it, the drive's attractors, the study's label)."""
     result = fmu_label(instance, payload["values"], payload["omega"], payload["amplitude"], payload["samples"],
-                       payload["start"], payload["periods"], payload["attractors"], payload.get("track"))
+                       payload["start"], payload["periods"], payload["attractors"], payload.get("track"),
+                       payload.get("cap", 0))
     agree = result["attractor"] == payload["study"]
     parted = result["diverged_at"] is not None and result["diverged_at"] <= payload["periods"]
     return {"index": payload["index"], "study": payload["study"], "fmu": result["attractor"],

@@ -129,6 +129,7 @@ def payloads(spec: BasinSpec, found: list[dict], starts: dict):
                        grid[chosen], [0] * len(chosen), periods, spec.device)
         return [{"index": i, "values": spec.values, "omega": spec.omega, "amplitude": spec.amplitude,
                  "samples": spec.samples, "start": grid[i].tolist(), "periods": k, "track": path,
+                 "cap": spec.max_cycles,
                  "attractors": attractors, "study": starts[i]["attractor"]}
                 for i, k, path in zip(chosen, periods, paths)]
     return make

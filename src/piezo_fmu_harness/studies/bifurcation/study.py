@@ -123,7 +123,8 @@ def checks(spec: FrequencySpec, sweeps: list[dict], backend, count: int, seed: i
         attractor = {**p["attractor"], "id": 0, "group": 0}
         payloads.append({"index": j * len(spec.ratios) + k, "values": spec.values, "omega": p["omega"],
                          "amplitude": p["amplitude_Y"], "samples": spec.settings.samples, "start": p["start"],
-                         "periods": p["periods"], "track": tracks(params, drive, [p["start"]], [0], [p["periods"]])[0],
+                         "periods": p["periods"], "cap": spec.settings.max_cycles,
+                         "track": tracks(params, drive, [p["start"]], [0], [p["periods"]])[0],
                          "attractors": [attractor], "study": 0, "direction": sweeps[j]["direction"],
                          "ratio": p["ratio"], "motion": p["motion"]})
     results = {r["index"]: r for _, r in backend.run_tasks([(q["index"], confirm_task, (q,)) for q in payloads])}

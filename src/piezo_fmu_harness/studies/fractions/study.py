@@ -153,7 +153,8 @@ def checks(spec: FractionSpec, found: list[dict], starts: dict, backend) -> list
                            periods, spec.device)
             return [{"index": i, "values": spec.values, "omega": float(spec.omegas[f]),
                      "amplitude": spec.amplitudes[f], "samples": spec.samples, "start": states[i % spec.starts].tolist(),
-                     "periods": k, "track": path, "attractors": attractors, "study": here[i]["attractor"]}
+                     "periods": k, "track": path, "cap": spec.max_cycles, "attractors": attractors,
+                     "study": here[i]["attractor"]}
                     for i, k, path in zip(chosen, periods, paths)]
         groups.append((make, here, spec.confirm, spec.seed + f))
     return confirm(backend, groups)
