@@ -54,12 +54,12 @@ def event_rounds(ens, mask, y0, v, h):
         free = s == 0.0
         contact = ~free
         if bool(xp.any(free)):
-            t_f, to_f, bad_f, flow = _free_events(xp, model, u[free], du[free], w[free], dw[free], _sub(rem, free))
+            t_f, to_f, bad_f = _free_events(xp, model, u[free], du[free], w[free], dw[free], rem[free])
             t_ev[free], to[free], bad[free] = t_f, to_f, bad_f
         if bool(xp.any(contact)):
             volts = xp.where(s > 0.0, vr, vl)[contact] if vl is not None else None
             t_c, bad_c, modal = _contact_events(ens, u[contact], du[contact], w[contact], dw[contact], s[contact],
-                                                volts, _sub(rem, contact))
+                                                volts, rem[contact])
             t_ev[contact], bad[contact] = t_c, bad_c
         dt = xp.minimum(t_ev, rem)
         switch = (t_ev <= rem) & ~bad
@@ -114,13 +114,9 @@ def event_rounds(ens, mask, y0, v, h):
     return onsets
 
 
-def _sub(a, mask):
-    return a if isinstance(a, float) else a[mask]
-
-
 def _free_events(xp, model, u, du, w, dw, rem):
-    """The next contact onset of free trajectories within ``rem`` (s): its time (inf: none), the
-    barrier it reaches, whether its location failed."""
+    """The next contact onset of free trajectories within ``rem`` (s, one per trajectory): its time
+    (inf: none), the barrier it reaches, whether its location failed."""
     free, hg = model.free, model.half_gap
     r, dr = w - u, dw - du
     tol = NOISE_ULPS * EPS * (xp.abs(u) + xp.abs(w) + hg)
@@ -140,12 +136,12 @@ def _free_events(xp, model, u, du, w, dw, rem):
         rr, drr = ww - uu, dw - dd
         return xp.stack([rr - hg, -rr - hg]), xp.stack([drr, -drr]), NOISE_ULPS * EPS * (xp.abs(uu) + xp.abs(ww) + hg)
 
-    time, which, failed = locate(xp, evaluate, g0, dg0, tol, near & ~now, _as_array(xp, rem, u), bound)
+    time, which, failed = locate(xp, evaluate, g0, dg0, tol, near & ~now, rem, bound)
     immediate = xp.any(now, axis=0)
     time = xp.where(immediate, 0.0, time)
     right = xp.where(immediate, now[0, :], which == 0)
     side = 2.0 * xp.astype(right, xp.float64) - 1.0
-    return time, side, failed & ~immediate, None
+    return time, side, failed & ~immediate
 
 
 def _contact_events(ens, u, du, w, dw, s, volts, rem):
@@ -172,7 +168,7 @@ def _contact_events(ens, u, du, w, dw, s, volts, rem):
                 tol)
 
     time, _, failed = locate(xp, evaluate, xp.stack([-delta]), xp.stack([-rate]), tol, xp.stack([near & ~now]),
-                             _as_array(xp, rem, u), bound)
+                             rem, bound)
     time = xp.where(now, 0.0, time)
     return time, failed & ~now, alpha
 
@@ -182,7 +178,3 @@ def _modal_state(ens, alpha, t):
     xp = ens.xp
     growth = xp.exp(ens._lam * xp.astype(t, xp.complex128)[:, None])
     return xp.real(xp.sum((alpha * growth)[:, :, None] * ens._q_t[None, ...], axis=1))
-
-
-def _as_array(xp, value, like):
-    return xp.full(like.shape, value) if isinstance(value, float) else value
