@@ -18,7 +18,7 @@ def draw(ds, path: Path) -> Path:
     for j, direction in enumerate(ds["direction"].values):
         samples = ds["p_section"].values[j] * 1e3
         x = np.repeat(ratio[:, None], samples.shape[1], axis=1)
-        top.plot(x.ravel(), samples.ravel(), ls="none", marker=".", ms=1.6, alpha=0.6, **STYLES[str(direction)])
+        top.plot(x.ravel(), samples.ravel(), ls="none", marker=".", ms=2.6, mew=0, **STYLES[str(direction)])
         bottom.plot(ratio, ds["impacts_per_cycle"].values[j], ls="-", lw=0.9, marker=".", ms=2, **STYLES[str(direction)])
     chaotic = (ds["motion"].values == "chaotic").any(axis=0)
     modulated = np.isin(ds["motion"].values, ("quasi-periodic", "strongly modulated")).any(axis=0)
