@@ -2,13 +2,12 @@
 instance of the FMI 2.0 FMU for the tests of the forced response (one per module)."""
 
 import os
-import shutil
 from pathlib import Path
 
 import pytest
 from hypothesis import settings
 
-from piezo_fmu_harness.fmu import FmuModel, Instance
+from piezo_fmu_harness.fmu import FmuModel, Instance, discard
 
 FMU = Path(__file__).resolve().parent.parent / "fmus" / "PiezoImpactDamper.fmu"
 
@@ -24,4 +23,4 @@ def instance():
     model = FmuModel(FMU)
     unzipdir = model.extract()
     yield Instance(model, unzipdir)
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)

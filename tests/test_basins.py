@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -141,3 +143,16 @@ def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, w
     out = tmp_path / "out"
     assert_refused(capsys, "basins", argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "points.jsonl").exists()
+
+
+def test_a_process_that_ran_another_study_first_finds_the_batch_engine(tmp_path):
+    """The first FMU a process loads gives it its ``piezo_fmu``; a study that ran before the basin
+    map, and removed its FMU's folder, must not take the batch engine's files with it."""
+    script = (f"from piezo_fmu_harness import cli\n"
+              f"assert cli.main(['nominal', '--stop-time', '0.1', '--out', {str(tmp_path / 'nominal')!r}]) == 0\n"
+              f"import sys; assert 'piezo_fmu.solver.batch' not in sys.modules\n"
+              f"assert cli.main(['basins', '--ratio', '1.2', '--grid', '2', '--jobs', '1', '--confirm', '0',\n"
+              f"                 '--no-progress', '--out', {str(tmp_path / 'basins')!r}]) == 0\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads((tmp_path / "basins" / "summary.json").read_text())["starts"] == 4

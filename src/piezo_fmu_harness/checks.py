@@ -5,7 +5,6 @@ the workers, and a first instance that accepts the start values."""
 from __future__ import annotations
 
 import math
-import shutil
 from typing import Optional
 
 from .spec import DEFAULT_STOP_TIME, UsageError
@@ -43,7 +42,7 @@ def times(args, step_default: float, config: Optional[dict] = None) -> tuple[flo
 
 def preflight(model, values_list: list[dict], where: str):
     """Extract the FMU, let one instance accept ``values_list``; return ``(unzipdir, instance)``."""
-    from .fmu import Instance
+    from .fmu import Instance, discard
     from .spec import check_with_fmu
 
     unzipdir = model.extract()
@@ -52,7 +51,7 @@ def preflight(model, values_list: list[dict], where: str):
         check_with_fmu(model, instance, values_list, where)
     except UsageError:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
         raise
     return unzipdir, instance
 

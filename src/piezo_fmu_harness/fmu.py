@@ -8,8 +8,11 @@ through :mod:`fmpy`. Nothing here imports the simulation core.
 
 from __future__ import annotations
 
+import atexit
 import math
 import os
+import shutil
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -158,6 +161,18 @@ class FmuModel:
     def extract(self) -> str:
         """Unzip the FMU into a fresh temporary folder and return its path."""
         return extract(str(self.path))
+
+
+def discard(folder: str) -> None:
+    """Remove an FMU's extraction folder, unless this process's ``piezo_fmu`` was imported from it:
+    the first FMU a process loads gives the process its copy of the package, and a module of it
+    imported later (the batch engine of the studies of many starts) needs its files. Such a folder
+    is removed when the process exits."""
+    home = getattr(sys.modules.get("piezo_fmu"), "__file__", None)
+    if home and Path(folder).resolve() in Path(home).resolve().parents:
+        atexit.register(shutil.rmtree, folder, True)
+        return
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 def _optional(text) -> Optional[float]:

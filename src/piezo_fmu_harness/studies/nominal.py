@@ -20,12 +20,11 @@ Run it with ``piezo-fmu nominal`` (or ``python -m piezo_fmu_harness nominal``).
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 from ..checks import assignments, open_model, preflight, times
 from ..drawing import new_figure, save_png
-from ..fmu import FmuModel, Instance
+from ..fmu import FmuModel, Instance, discard
 from ..series import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
 from ..spec import DEFAULT_STOP_TIME
 
@@ -54,7 +53,7 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     finally:
         if own:
             instance.free()
-            shutil.rmtree(unzipdir, ignore_errors=True)
+            discard(unzipdir)
     if int(without_damper["impact_count"][-1]) != 0:
         raise RuntimeError(f"the run without damper (d = {WIDE_GAP} m) still made impacts; widen WIDE_GAP")
 
@@ -140,7 +139,7 @@ def command(args) -> int:
         summary = run_nominal(model, out, stop_time, step, overrides, instance=instance)
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     print("\n".join(summary_lines(summary)))
     return 0
 

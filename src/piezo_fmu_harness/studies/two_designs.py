@@ -9,12 +9,11 @@ table of the paper's DI and V_rms beside ours, with the ratios and the duration)
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 from ..checks import assignments, open_model, preflight, times
 from ..drawing import new_figure, save_png
-from ..fmu import FmuModel, Instance
+from ..fmu import FmuModel, Instance, discard
 from ..series import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
 from ..spec import DEFAULT_STOP_TIME, UsageError
 
@@ -44,7 +43,7 @@ def run_two_designs(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float =
                   for name, design in DESIGNS.items()}
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     ours = {name: metrics_at_end(s) for name, s in series.items()}
     ratio = {
         "DI": _ratio(ours["designed"]["DI_cm_per_s"], ours["poor"]["DI_cm_per_s"]),
@@ -162,7 +161,7 @@ def command(args) -> int:
     out = prepare_output_dir(args.out)
     unzipdir, instance = preflight(model, [{**overrides, **d} for d in DESIGNS.values()], "two designs")
     instance.free()
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)
     result = run_two_designs(model, out, stop_time, step, overrides)
     print("\n".join(summary_lines(result)))
     return 0

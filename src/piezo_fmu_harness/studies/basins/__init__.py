@@ -58,7 +58,7 @@ def grid_option(text, option: str, default: tuple, unit: str) -> tuple:
 
 
 def command(args) -> int:
-    import shutil
+    from ...fmu import discard
     import time
 
     from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
@@ -106,7 +106,7 @@ def command(args) -> int:
             backend.close()
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     report = study.write(spec, found, starts, checks, folder, time.perf_counter() - begin)
     print(f"{PROG} basins at w/w_n = {ratio:g}: {report['starts']} starts")
     for attractor in report["attractors"]:

@@ -31,7 +31,7 @@ def register(commands) -> None:
 
 
 def command(args) -> int:
-    import shutil
+    from ...fmu import discard
     from pathlib import Path
 
     from ...checks import PROG, device, make_backend, open_model, preflight, whole, worker_count
@@ -65,7 +65,7 @@ def command(args) -> int:
             backend.close()
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     report = study.write(spec, sweeps, folder, wall, checked)
     print(f"{PROG} bifurcation: {report['points']} points in {wall:.1f} s")
     for direction, classes in report["classes"].items():

@@ -279,7 +279,7 @@ def parameter_range(model, args, spec) -> tuple[str, tuple, list, str]:
 
 
 def command(args) -> int:
-    import shutil
+    from ...fmu import discard
 
     from ...checks import PROG, make_backend, open_model, positive, preflight, whole, worker_count
     from ...engine import InProcess
@@ -312,7 +312,7 @@ def command(args) -> int:
             backend.close()
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     write(study, folder, units)
     report = summarize(study)
     print(f"{PROG} continuation in {parameter}: {report['branches']} branches, {report['points']} points, "

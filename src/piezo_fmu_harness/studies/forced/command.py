@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import shutil
 import signal
 import sys
 
+from ...fmu import discard
 from ...checks import PROG, interrupt, make_backend, open_model, preflight, worker_count
 from ...spec import UsageError
 
@@ -45,7 +45,7 @@ def frequency_response(args) -> int:
             signal.signal(signal.SIGTERM, previous)
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     result = frequency_results.finish(model, run, jobs)
     print("\n".join(frequency_results.summary_lines(result["summary"])))
     print(f"  results in {run.folder}")

@@ -43,7 +43,7 @@ def register(commands) -> None:
 
 
 def command(args) -> int:
-    import shutil
+    from ...fmu import discard
     import time
 
     from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
@@ -86,7 +86,7 @@ def command(args) -> int:
             backend.close()
     finally:
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     cycles = sum(record["cycles"] for record in done.values())
     report = study.write(spec, found, outcome, checks, folder, time.perf_counter() - begin, cycles)
     print(f"{PROG} fractions: {report['frequencies']} frequencies x {starts} starts, {len(report['attractors'])} "

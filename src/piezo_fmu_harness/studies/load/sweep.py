@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import time
 from pathlib import Path
 from typing import Optional
@@ -30,7 +29,7 @@ import numpy as np
 from ...circuit import circuit_constants
 from ...drawing import ohms
 from ...engine import InProcess, ProcessPool
-from ...fmu import FmuModel, Instance
+from ...fmu import FmuModel, Instance, discard
 from ...series import write_csv
 from ...spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP
 
@@ -290,4 +289,4 @@ def summary_lines(summary: dict) -> list[str]:
 def cleanup(instance: Instance, unzipdir: str) -> None:
     """Free ``instance`` and remove the folder its FMU was extracted to."""
     instance.free()
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)

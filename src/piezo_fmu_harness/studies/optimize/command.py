@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-import shutil
 import signal
 import sys
 
+from ...fmu import discard
 from ...checks import (
     PROG,
     assignments,
@@ -141,7 +141,7 @@ def optimize(args) -> int:
         if backend is not None and not isinstance(backend, InProcess):
             backend.close()
         instance.free()
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     optimize_report.write_report(report, problem, folder, model)
     print("\n".join(optimize_report.report_lines(report, problem, model)))
     print(f"  results in {folder}")

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import shutil
 import signal
 import sys
 from pathlib import Path
 from typing import Optional
 
+from ...fmu import discard
 from ...checks import (
     PROG,
     assignments,
@@ -106,7 +106,7 @@ def sweep(args) -> int:
                 return 130
     finally:
         signal.signal(signal.SIGTERM, previous)
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
 
     names = [name for name, _, _ in sweeps]
     results = write_results(model, runs, names, panels, out, quantile, args.damping, jobs)
