@@ -43,7 +43,7 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 from piezo_fmu import Parameters  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, describe, device_error, settle  # noqa: E402
 from piezo_fmu_harness import cli  # noqa: E402
-from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
 from piezo_fmu_harness.periodic.band import linear_transmissibility  # noqa: E402
 from piezo_fmu_harness.periodic.confirm import fmu_label  # noqa: E402
 from piezo_fmu_harness.periodic.drive import HarmonicDrive  # noqa: E402
@@ -181,6 +181,7 @@ def main() -> int:
             report["gpu"] = device_error("gpu")
     finally:
         instance.free()
+        discard(unzipdir)
     if args.studies:
         report["studies"] = studies(args.jobs)
     print(json.dumps(report, indent=2))

@@ -50,7 +50,7 @@ from piezo_fmu_harness.studies.forced import chains as fr  # noqa: E402
 from piezo_fmu_harness.studies.forced import results as frequency_results  # noqa: E402
 from piezo_fmu_harness.studies.sweep import command as commands  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
-from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
 from piezo_fmu_harness.studies.sweep.run import execute, open_sweep  # noqa: E402
 
 
@@ -70,7 +70,7 @@ def frequency_response(model: FmuModel, out: Path, jobs: int) -> dict:
     begin = time.perf_counter()
     result = frequency_results.finish(model, run, jobs)
     outputs_s = time.perf_counter() - begin
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)
     records = list(run.done.values())
     chains = {}
     for chain, (damper, direction) in enumerate(fr.CHAINS):
@@ -103,7 +103,7 @@ def free_decay(model: FmuModel, out: Path, jobs: int) -> dict:
     begin = time.perf_counter()
     execute(runs, ProcessPool(model, unzipdir, jobs), progress=False)
     wall = time.perf_counter() - begin
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)
     records = [r for run in runs for r in run.done.values()]
     return {"points": len(records), "wall_s": wall, "points_per_s": len(records) / wall,
             "worker_cpu_s": sum(r["cpu_seconds"] for r in records)}

@@ -45,7 +45,7 @@ from piezo_fmu_harness import cli  # noqa: E402
 from piezo_fmu_harness.studies.sweep import analysis  # noqa: E402
 from piezo_fmu_harness.studies.sweep import command as commands  # noqa: E402
 from piezo_fmu_harness.engine import ProcessPool, default_jobs  # noqa: E402
-from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
 from piezo_fmu_harness.spec import DEFAULT_SWEEP_STEP  # noqa: E402
 from piezo_fmu_harness.studies.sweep.run import display, execute, open_sweep, write_results  # noqa: E402
 
@@ -80,7 +80,7 @@ def sweep_and_write(model, runs, sweeps, panels, out: Path, jobs: int) -> dict:
     begin, begin_cpu = time.perf_counter(), time.process_time()
     execute(runs, ProcessPool(model, unzipdir, jobs), progress=False)
     engine_s, main_cpu_s = time.perf_counter() - begin, time.process_time() - begin_cpu
-    shutil.rmtree(unzipdir, ignore_errors=True)
+    discard(unzipdir)
     begin, before = time.perf_counter(), os.times()
     parts: dict = {}
     results = write_results(model, runs, [name for name, _, _ in sweeps], panels, out, jobs=jobs, timings=parts)

@@ -8,7 +8,6 @@ prints the Markdown table (SI units; about a minute on one core).
 
 from __future__ import annotations
 
-import shutil
 import sys
 from pathlib import Path
 
@@ -17,7 +16,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from masri_caughey_fmu import table  # noqa: E402
 
-from piezo_fmu_harness.fmu import FmuModel, Instance  # noqa: E402
+from piezo_fmu_harness.fmu import FmuModel, Instance, discard  # noqa: E402
 
 
 def main() -> None:
@@ -26,7 +25,7 @@ def main() -> None:
     try:
         rows = table(Instance(model, unzipdir))
     finally:
-        shutil.rmtree(unzipdir, ignore_errors=True)
+        discard(unzipdir)
     print("| case | K_eq factor | K_eq (N/m) | e | amplitude harness (mm) | closed form (mm) | rel. error "
           "| impact velocity harness (m/s) | closed form (m/s) | rel. error | max multiplier harness "
           "| closed form | stable (harness / closed form) |")
