@@ -33,43 +33,24 @@ def empty_measures(n: int) -> dict:
 def measure(ens: Ensemble, ids, measures: dict, scales, periods: int, finder) -> tuple:
     """Lyapunov exponent, modulation, impacts and amplitudes of the trajectories left, written into
     ``measures``: each is marched beside a companion ``COMPANION`` of its size away, brought back to
-    that distance (along the same direction) after every period. Returns their states and phases
-    at the end, and ``p`` at each section of the window."""
+    that distance (along the same direction) after every period (:meth:`Ensemble.separate`). Returns
+    their states and phases at the end, and ``p`` at each section of the window."""
     m = len(ids)
-    states, sides, groups, volts = ens.states, ens.sides, ens.group, ens.voltages
+    states, groups = ens.states, ens.group
     direction = np.random.default_rng(0).standard_normal(4)
     direction /= np.linalg.norm(direction)
     scale = scales[groups]
     delta = COMPANION * np.maximum(np.abs(states * scale).max(axis=1), 1e-300)
-    pair = Ensemble(ens.params, ens.drives, np.concatenate([states, states]), np.concatenate([groups, groups]),
-                    np.concatenate([sides, sides]), None if volts is None else np.concatenate([volts, volts], axis=1),
-                    ens.device, ens.model)
-    companions = np.arange(2 * m) >= m
-    logs = np.zeros(m)
-    tops, bottoms, counts, samples = [], [], [], []
-    offset = direction[None] * delta[:, None] / scale
-    for _ in range(periods):
-        pair.assign(companions, states + offset, sides, volts)
-        out = pair.advance(1, observe=True)
-        finder.cycles += 2 * m
-        now = pair.states
-        states, other = now[:m], now[m:]
-        samples.append(states[:, 0])
-        sides, volts = pair.sides[:m], None if volts is None else pair.voltages[:, :m]
-        gap = np.linalg.norm((other - states) * scale, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logs += np.log(gap / delta)
-            offset = (other - states) * (delta / gap)[:, None]
-        tops.append(out["top"][0, :m])
-        bottoms.append(out["bottom"][0, :m])
-        counts.append(out["impacts"][0, :m])
-    swings = 0.5 * (np.array(tops) - np.array(bottoms))
+    out = ens.separate(direction[None] * delta[:, None] / scale, scale, delta, periods)
+    finder.cycles += 2 * m * periods
+    tops, bottoms = out["top"], out["bottom"]
+    swings = 0.5 * (tops - bottoms)
     largest = swings.max(axis=0)
-    measures["exponent"][ids] = logs / periods
+    measures["exponent"][ids] = out["logs"].sum(axis=0) / periods
     with np.errstate(divide="ignore", invalid="ignore"):
         measures["modulation"][ids] = np.where(largest > 0, (largest - swings.min(axis=0)) / largest, 0.0)
-    measures["impacts_per_cycle"][ids] = np.array(counts).mean(axis=0)
-    measures["amplitude"][ids] = 0.5 * (np.array(tops).max(axis=0) - np.array(bottoms).min(axis=0))
+    measures["impacts_per_cycle"][ids] = out["impacts"].mean(axis=0)
+    measures["amplitude"][ids] = 0.5 * (tops.max(axis=0) - bottoms.min(axis=0))
     measures["amplitude_min"][ids] = swings.min(axis=0)
     measures["amplitude_max"][ids] = largest
-    return states, sides, np.array(samples).T
+    return ens.states, ens.sides, out["samples"].T
