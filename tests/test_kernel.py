@@ -65,7 +65,7 @@ def test_the_source_run_as_python_gives_the_compiled_kernels_bits(case):
     out = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
            np.empty((periods, n)), np.empty((periods, n)))
     for i in range(n):
-        plain["march_one"](i, state, np.zeros(n, bool), np.zeros(n, np.int64), *tables.arguments(), *out,
+        plain["march_one"](True, i, state, np.zeros(n, bool), np.zeros(n, np.int64), *tables.arguments(), *out,
                            np.empty(plain["WORK"]))
     assert compiled["impacts"].sum() > 0
     for name, values in zip(("sections", "sides", "impacts", "top", "bottom"), out):

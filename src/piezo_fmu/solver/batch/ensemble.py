@@ -157,7 +157,7 @@ class Ensemble:
         """
         from . import kernel
         periods = whole(periods)
-        out = kernel.march(self.device, self._tables, self._state, self.failed, self.group, periods)
+        out = kernel.march(self.device, self._tables, self._state, self.failed, self.group, periods, observe)
         self.periods += periods
         if not observe:
             del out["top"], out["bottom"]

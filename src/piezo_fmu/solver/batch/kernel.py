@@ -74,10 +74,10 @@ def _compiled(jit, drivers: dict, inline=None) -> dict:
 
 # -- the CPU ---------------------------------------------------------------------------------------
 
-def _march_cpu(state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
+def _march_cpu(observe, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
     for i in prange(state.shape[1]):  # noqa: F821 (a global of the compiled namespace)
         work = np.empty(WORK)  # noqa: F821
-        march_one(i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
+        march_one(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
 
 
 def _separate_cpu(state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms):
@@ -103,11 +103,11 @@ def _cpu() -> dict:
 
 # -- the GPU ---------------------------------------------------------------------------------------
 
-def _march_gpu(state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
+def _march_gpu(observe, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
     i = cuda.grid(1)  # noqa: F821
     if i < state.shape[1]:
         work = cuda.local.array(WORK, float64)  # noqa: F821
-        march_one(i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
+        march_one(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
 
 
 def _separate_gpu(state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms):
@@ -218,14 +218,15 @@ def _modes(lam: np.ndarray) -> tuple[list, list]:
 
 
 def march(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray, groups: np.ndarray,
-          periods: int) -> dict:
+          periods: int, observe: bool = True) -> dict:
     """March every trajectory of ``state`` ((7, n) host: ``p, p', q, q'``, side, left and right
     voltage; updated in place, as is ``failed``) ``periods`` periods. Returns host arrays:
-    ``sections`` (periods, n, 4), ``sides`` and ``impacts`` (periods, n), ``top`` and ``bottom``."""
+    ``sections`` (periods, n, 4), ``sides`` and ``impacts`` (periods, n), and with ``observe``
+    ``top`` and ``bottom`` (NaN without)."""
     n = state.shape[1]
     outputs = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
                np.empty((periods, n)), np.empty((periods, n)))
-    _launch(device, "march", (state, failed, groups) + tables.arguments() + outputs, n, (0, 1), 5)
+    _launch(device, "march", (observe, state, failed, groups) + tables.arguments() + outputs, n, (1, 2), 5)
     sections, sides, impacts, top, bottom = outputs
     return {"sections": sections, "sides": sides.astype(np.int64), "impacts": impacts, "top": top, "bottom": bottom}
 
@@ -256,7 +257,7 @@ def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs
         compiled(*args)
         return
     from numba import cuda
-    on_device = [cuda.to_device(np.ascontiguousarray(a)) for a in args]
+    on_device = [cuda.to_device(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) else a for a in args]
     compiled[(n + GPU_THREADS - 1) // GPU_THREADS, GPU_THREADS](*on_device)
     for k in list(updated) + list(range(len(args) - outputs, len(args))):
         on_device[k].copy_to_host(args[k])

@@ -134,15 +134,15 @@ def hermite_extremes(p0, v0, p1, v1, h):
     return high, low
 
 
-def one_period(p, dp, q, dq, side, vl, vr, g, drive, c,
+def one_period(observe, p, dp, q, dq, side, vl, vr, g, drive, c,
                work):
     """One forcing period of a trajectory under drive ``g``: ``(p, p', q, q', side, vl, vr, onsets,
     failed, top, bottom)``, ``top``/``bottom`` the extremes of ``p`` (the Hermite interpolant of the
-    hold nodes)."""
+    hold nodes) when ``observe``, else NaN."""
     h, ec, es, decay = drive[g, STEP], drive[g, EC], drive[g, ES], drive[g, DECAY]
     samples = (drive.shape[1] - NODES - 1) // 2
     onsets = 0
-    top = bottom = p
+    top = bottom = p if observe else NAN
     for k in range(samples):
         p0, dp0 = p, dp
         p, dp, q, dq, side, vl, vr, count, failed = hold_step(p, dp, q, dq, side, vl, vr, drive[g, NODES + k],
@@ -151,16 +151,17 @@ def one_period(p, dp, q, dq, side, vl, vr, g, drive, c,
         onsets += count
         if failed:
             return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True, NAN, NAN
-        high, low = hermite_extremes(p0, dp0, p, dp, h)
-        top, bottom = fmax(top, high), fmin(bottom, low)
+        if observe:
+            high, low = hermite_extremes(p0, dp0, p, dp, h)
+            top, bottom = fmax(top, high), fmin(bottom, low)
     return p, dp, q, dq, side, vl, vr, onsets, False, top, bottom
 
 
-def march_one(i, state, failed, groups, drive, c, sections,
+def march_one(observe, i, state, failed, groups, drive, c, sections,
               sides, impacts, tops, bottoms, work):
     """Trajectory ``i`` of ``state`` ((7, n): ``p, p', q, q'``, side, left and right voltage) through
-    ``sections.shape[0]`` periods, in place; each period's section state, phase, onsets and extremes
-    of ``p`` written to the outputs. A failed trajectory stays NaN."""
+    ``sections.shape[0]`` periods, in place; each period's section state, phase, onsets and (when
+    ``observe``) extremes of ``p`` written to the outputs. A failed trajectory stays NaN."""
     p, dp, q, dq, side, vl, vr = (state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
                                   state[6, i])
     bad = failed[i]
@@ -170,7 +171,7 @@ def march_one(i, state, failed, groups, drive, c, sections,
         top = bottom = NAN
         if not bad:
             p, dp, q, dq, side, vl, vr, onsets, bad, top, bottom = one_period(
-                p, dp, q, dq, side, vl, vr, g, drive, c, work)
+                observe, p, dp, q, dq, side, vl, vr, g, drive, c, work)
         sections[period, i, 0], sections[period, i, 1] = p, dp
         sections[period, i, 2], sections[period, i, 3] = q, dq
         sides[period, i] = side
@@ -197,9 +198,9 @@ def separate_one(i, state, failed, groups, offset, scale, delta, drive, c, logs,
         onsets = 0
         top = bottom = NAN
         if not bad:
-            c0, c1, c2, c3, _, _, _, _, _, _, _ = one_period(c0, c1, c2, c3, side, vl, vr, g, drive, c, work)
-            p, dp, q, dq, side, vl, vr, onsets, bad, top, bottom = one_period(p, dp, q, dq, side, vl, vr, g, drive, c,
-                                                                              work)
+            c0, c1, c2, c3, _, _, _, _, _, _, _ = one_period(False, c0, c1, c2, c3, side, vl, vr, g, drive, c, work)
+            p, dp, q, dq, side, vl, vr, onsets, bad, top, bottom = one_period(True, p, dp, q, dq, side, vl, vr, g, drive,
+                                                                              c, work)
         e0, e1 = (c0 - p) * scale[0, i], (c1 - dp) * scale[1, i]
         e2, e3 = (c2 - q) * scale[2, i], (c3 - dq) * scale[3, i]
         gap = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
