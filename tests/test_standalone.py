@@ -154,10 +154,7 @@ def test_fmpy_validate_finds_no_problems_and_the_licences_are_inside(standalone_
 
 
 def test_the_linux_runtime_needs_the_glibc_the_docs_name(standalone_fmus):
-    with zipfile.ZipFile(standalone_fmus[2]) as fmu:
-        libraries = {name: fmu.read(name) for name in fmu.namelist()
-                     if name.startswith("resources/python/linux64/") and ".so" in name}
-    assert runtimes.glibc_needed(libraries) == GLIBC
+    assert runtimes.glibc_needed(runtimes.linux_libraries(standalone_fmus[2])) == GLIBC
     for doc in ("README.md", "docs/simulators.md"):
         assert f"glibc {GLIBC}" in (REPO / doc).read_text(), doc
 

@@ -189,5 +189,12 @@ def glibc_needed(files: dict[str, bytes]) -> str:
     return ".".join(map(str, max(versions)))
 
 
+def linux_libraries(fmu: Path) -> dict[str, bytes]:
+    """The shared libraries of a standalone FMU's Linux runtime, by name in the archive."""
+    with zipfile.ZipFile(fmu) as archive:
+        return {name: archive.read(name) for name in archive.namelist()
+                if name.startswith("resources/python/linux64/") and ".so" in name}
+
+
 #: Each runtime by its folder under ``resources/python/`` (the loader's ``PLATFORM_RUNTIME``).
 RUNTIMES = {"linux64": linux_runtime, "win64": windows_runtime}

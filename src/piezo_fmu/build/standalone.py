@@ -106,7 +106,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(cached(target).read_bytes())
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
-    print(f"its Linux runtime needs glibc {runtimes.glibc_needed(runtimes.linux_runtime().files)} or newer")
+    print(f"its Linux runtime needs glibc {runtimes.glibc_needed(runtimes.linux_libraries(path))} or newer")
     return 0
 
 
