@@ -7,6 +7,8 @@ on ``WINEPATH`` and no variable of the project set (``tests/windows.py``'s bare 
    fmpy on Linux to the tolerances of ``tests/test_windows.py`` (its normal FMUs' runs, with the
    same embeddable CPython 3.13.2 and numpy 2.1.3, agree with fmpy on Linux to the same bounds).
 3. Every refusal, the bad start value included, returns Error.
+4. A normal FMU beside the standalone one in one process uses the interpreter the standalone one
+   started, with the same bits.
 """
 
 from __future__ import annotations
@@ -63,3 +65,15 @@ def test_with_no_python_installed_every_refusal_of_the_standalone_fmu_returns_er
             "native_host: refused as it must be (Error): exiting initialization with m = -1\n") in completed.stderr
     assert completed.stderr.count("refused as it must be (Error)") == 16
     assert "Fatal" not in completed.stderr
+
+
+def test_with_no_python_installed_a_normal_fmu_beside_the_standalone_one_uses_its_interpreter(
+        host, standalone_dirs, fmu_dirs, fresh, tmp_path):
+    """The standalone FMU starts its CPython; the normal FMU, which finds none in this prefix alone,
+    finds it in the process, and both give the same bits."""
+    out = tmp_path / "out.csv"
+    completed = run_host(host, standalone_dirs[2], out, (*NOMINAL, "--also", windows.windows_path(fmu_dirs[2])), fresh)
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stderr == ""
+    assert_agrees_with_linux(out, "nominal")
+    assert Path(f"{out}.also").read_bytes() == out.read_bytes()
