@@ -6,12 +6,14 @@ carry their own CPython and numpy and run where no Python is installed, with the
    the repository: the nominal case and the cross-check scenario, bit for bit the normal FMU's
    (which the same host runs with the project's Python on ``PATH``). Every refusal still returns
    Error there, the bad start value included.
-2. A standalone and a normal FMU (in either order), or two standalone FMUs, in one process share
+2. When its own runtime cannot be loaded, the loader goes on to the normal FMUs' routes, and its
+   message says what happened to each.
+3. A standalone and a normal FMU (in either order), or two standalone FMUs, in one process share
    one interpreter and give the bits of each alone.
-3. A Python host without numpy (``tests/bare_python_host.py``, ctypes only, in a virtual
+4. A Python host without numpy (``tests/bare_python_host.py``, ctypes only, in a virtual
    environment of the build's CPython): the FMU's own numpy is added and the bits are the normal
    FMU's; when the FMU's numpy is for another CPython, instantiation fails with what is missing.
-4. fmpy's ``validate`` finds no problem; each carries the licences of CPython and numpy, its runtime
+5. fmpy's ``validate`` finds no problem; each carries the licences of CPython and numpy, its runtime
    needs the glibc the docs name, and the README gives each FMU's size.
 """
 
@@ -92,6 +94,25 @@ def test_with_nothing_but_path_nonexistent_every_refusal_of_the_standalone_fmu_r
             "native_host: refused as it must be (Error): exiting initialization with m = -1\n") in completed.stderr
     assert completed.stderr.count("refused as it must be (Error)") == 16
     assert "Fatal" not in completed.stderr
+
+
+def test_when_its_own_runtime_cannot_be_loaded_the_loader_goes_on_to_the_routes_of_the_normal_fmus(
+        host, standalone_fmus, tmp_path):
+    fmu_dir = extract(standalone_fmus[2], tmp_path / "fmu")
+    home = fmu_dir / "resources" / "python" / "linux64"
+    (home / "library.txt").write_text("lib/libpython-missing.so\n")
+    alone = run_host(host, fmu_dir, tmp_path / "out.csv", ("--stop", "0.01"), NOTHING)
+    assert alone.returncode == 1
+    missing = home / "lib" / "libpython-missing.so"
+    assert alone.stderr == (
+        "[native_host] logStatusError (Error): piezo-fmu: no Python for this FMU: PIEZO_FMU_PYTHON is unset and there "
+        f"is no python3 on PATH=/nonexistent; tried the FMU's own Python ({home}): cannot load {missing} ({missing}: "
+        "cannot open shared object file: No such file or directory). Set PIEZO_FMU_PYTHON=/path/to/python, a Python 3 "
+        "built with --enable-shared that can import numpy (for example a virtual environment's bin/python).\n"
+        "native_host: fmi2Instantiate failed\n")
+    with_python = run_host(host, fmu_dir, tmp_path / "out.csv", ("--stop", "0.01"), native.environment())
+    assert with_python.returncode == 0, with_python.stderr
+    assert (tmp_path / "out.csv").read_text().splitlines()[-1].startswith("0.01,")
 
 
 @pytest.mark.parametrize("first, second, env", [
