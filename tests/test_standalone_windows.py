@@ -3,10 +3,11 @@ with mingw-w64, runs them under Wine in a fresh prefix where no Python is instal
 on ``WINEPATH`` and no variable of the project set (``tests/windows.py``'s bare environment).
 
 1. The prefix has no Python: the normal FMU fails there with the loader's "no Python" message.
-2. The nominal case and the cross-check scenario run cleanly in both FMI versions and agree with
-   fmpy on Linux to the tolerances of ``tests/test_windows.py`` (its normal FMUs' runs, with the
-   same embeddable CPython 3.13.2 and numpy 2.1.3, agree with fmpy on Linux to the same bounds).
-3. Every refusal, the bad start value included, returns Error.
+2. The nominal case runs cleanly in both FMI versions and agrees with fmpy on Linux to the
+   tolerances of ``tests/test_windows.py`` (its normal FMUs' runs, with the same embeddable
+   CPython 3.13.2 and numpy 2.1.3, agree with fmpy on Linux to the same bounds).
+3. Every refusal, the bad start value included, returns Error; after Reset the same instance runs
+   the cross-check scenario, which agrees with fmpy on Linux as well.
 4. A normal FMU beside the standalone one in one process uses the interpreter the standalone one
    started, with the same bits.
 """
@@ -45,26 +46,29 @@ def test_the_fresh_prefix_has_no_python_for_the_normal_fmu(host, fmu_dirs, fresh
                                        "PIEZO_FMU_PYTHON is unset; there is no py launcher; there is no python.exe")
 
 
-@pytest.mark.parametrize("case", ["nominal", "harmonic"])
 @pytest.mark.parametrize("version", [2, 3])
-def test_with_no_python_installed_the_standalone_fmu_runs_cleanly_and_agrees_with_fmpy_on_linux(
-        host, standalone_dirs, fresh, tmp_path, version, case):
+def test_with_no_python_installed_the_standalone_fmu_runs_the_nominal_case_cleanly_and_agrees_with_fmpy_on_linux(
+        host, standalone_dirs, fresh, tmp_path, version):
     out = tmp_path / "standalone.csv"
-    completed = run_host(host, standalone_dirs[version], out, NOMINAL if case == "nominal" else HARMONIC, fresh)
+    completed = run_host(host, standalone_dirs[version], out, NOMINAL, fresh)
     assert completed.returncode == 0, completed.stderr  # any status but OK would be exit status 1
     assert completed.stderr == "" and completed.stdout == ""
-    assert_agrees_with_linux(out, case)
+    assert_agrees_with_linux(out, "nominal")
 
 
 @pytest.mark.parametrize("version", [2, 3])
-def test_with_no_python_installed_every_refusal_of_the_standalone_fmu_returns_error(
+def test_with_no_python_installed_every_refusal_returns_error_and_after_reset_the_cross_check_agrees_with_fmpy(
         host, standalone_dirs, fresh, tmp_path, version):
-    completed = run_host(host, standalone_dirs[version], tmp_path / "out.csv", ("--stop", "0.01", "--refusals"), fresh)
+    """The refusals and the cross-check scenario in one run (each Wine start costs seconds): the
+    instance refuses every bad call with Error, is reset, and then runs the scenario."""
+    out = tmp_path / "standalone.csv"
+    completed = run_host(host, standalone_dirs[version], out, (*HARMONIC, "--refusals"), fresh)
     assert completed.returncode == 0, completed.stderr  # each refusal returned Error, everything else OK
     assert ("(Error): invalid start values: m = -1.0 kg is out of range; allowed range (0, inf)\n"
             "native_host: refused as it must be (Error): exiting initialization with m = -1\n") in completed.stderr
     assert completed.stderr.count("refused as it must be (Error)") == 16
     assert "Fatal" not in completed.stderr
+    assert_agrees_with_linux(out, "harmonic")
 
 
 def test_with_no_python_installed_a_normal_fmu_beside_the_standalone_one_uses_its_interpreter(
