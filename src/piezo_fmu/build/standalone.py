@@ -17,7 +17,7 @@ is compressed (deflate: the runtimes are large) and reproducible from the same i
 
 The standalone FMUs are not committed. :func:`cached` builds each once per content of its inputs
 (the normal FMU's bytes, the runtimes' versions, this module and the hook), in the cache the
-runtimes use.
+runtimes use, which keeps the most recently used builds only.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import shutil
 import sys
 import xml.etree.ElementTree as ET
 import zipfile
@@ -37,6 +38,8 @@ HOOK = Path(__file__).with_name("own_numpy.py")
 HOOK_MODULE = "piezo_fmu_own_numpy"
 #: Where the standalone FMUs go (``make fmu-standalone``).
 BUILD = Path("build")
+#: How many builds of each FMU :func:`cached` keeps (the most recently used).
+KEPT = 8
 
 
 def dest(target: fmus.Target) -> Path:
@@ -92,7 +95,17 @@ def cached(target: fmus.Target) -> Path:
         partial = path.with_name(path.name + ".partial")
         partial.write_bytes(build_bytes(target, normal))
         partial.replace(path)
+    path.parent.touch()
+    _prune(path.parent.parent)
     return path
+
+
+def _prune(folder: Path) -> None:
+    """Keep the :data:`KEPT` most recently used builds in the cache (each is 48 MB; every change of
+    the sources makes a new one, and several checkouts may share the cache)."""
+    used = sorted((entry for entry in folder.iterdir() if entry.is_dir()), key=lambda entry: entry.stat().st_mtime)
+    for entry in used[:-KEPT]:
+        shutil.rmtree(entry, ignore_errors=True)
 
 
 def main(argv: Optional[list[str]] = None) -> int:
