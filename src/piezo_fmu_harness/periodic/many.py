@@ -109,7 +109,7 @@ def confirm_task(instance, payload: dict) -> dict:
     study marched it, the drive's attractors, the study's label)."""
     result = fmu_label(instance, payload["values"], payload["omega"], payload["amplitude"], payload["samples"],
                        payload["start"], payload["periods"], payload["attractors"], payload.get("track"),
-                       payload.get("cap", 0))
+                       payload.get("cap", 0), prefer=payload["study"])
     agree = result["attractor"] == payload["study"]
     parted = result["diverged_at"] is not None and result["diverged_at"] <= payload["periods"]
     return {"index": payload["index"], "study": payload["study"], "fmu": result["attractor"],
