@@ -1,26 +1,28 @@
-"""The batch engine against marching through the FMU (issue 27), measured side by side in one run.
+"""The compiled kernel against the array engine and the FMU (issues 27 and 32), side by side in one run.
 
-    python benchmarks/bench_batch.py [--starts N] [--fmu-starts K] [--periods P] [--studies] [--jobs J]
+    python benchmarks/bench_batch.py [--fmu-starts K] [--studies] [--jobs J]
 
-1. **Throughput.** ``N`` random starts at 1.2 sqrt(K/M) (the nominal damper, ``Y`` = 1 mm, 64 hold
-   steps a period; ``p0`` and ``p0'/w`` within two linear amplitudes, the impact mass at rest in the
-   middle) marched ``P`` periods on the batch engine (numpy on the CPU), and the first ``K`` of them
-   marched ``P`` periods through the FMU (the harness's drive, fmpy); start-periods per second of
-   each, and their ratio, ``speedup`` (target: >= 50 on 2 cores). On a machine with CuPy and a GPU,
-   the same starts on the GPU (and how far its sections end from the CPU's), and 10 times as many.
-2. **Agreement.** The ``K`` starts are taken to where they go on the batch engine (the rule of
+1. **Throughput against the batch size.** Random starts at 1.2 sqrt(K/M) (the nominal damper,
+   ``Y`` = 1 mm, 64 hold steps a period; ``p0`` and ``p0'/w`` within two linear amplitudes, the
+   impact mass at rest in the middle) marched on the compiled kernel (every core) and on the array
+   engine (numpy), 1, 100, 10,000 and 100,000 starts (the array engine not at 100,000), each for
+   about 200,000 start-periods; the first ``K`` of them through the FMU (the harness's drive,
+   fmpy). ``speedup``: the kernel at 10,000 starts over the FMU (target >= 50, issue 27);
+   ``single``: the kernel at 1 start over the FMU (target >= 200, issue 32); the kernel at 10,000
+   starts must reach 1,000,000 start-periods a second on 2 cores.
+2. **JIT compile time**, apart: a fresh process that compiles the kernel into an empty cache, and
+   one that finds it in the cache (target below 5 s).
+3. **Agreement.** The ``K`` starts are taken to where they go on the kernel (the rule of
    ``piezo_fmu.solver.batch.settle``), and the FMU is marched from each until it shows which of
    those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when no
-   FMU label differs from the batch engine's while their trajectories were together;
-   ``agreeing`` counts the equal labels, ``parted`` the starts whose FMU trajectory left the batch
-   engine's in a chaotic transient before the batch engine's answer was known.
-3. With ``--studies``: the studies that march many starts, through the command line, timed: the
-   201 x 201 basin map at 1.2 sqrt(K/M) (target: 5 minutes on 2 cores), the default bifurcation
-   diagram (200 frequencies up and down; target: 30 s) and the default fractions (61 frequencies x
-   500 starts; target: 10 minutes).
+   FMU label differs from the kernel's while their trajectories were together.
+4. On a machine with an NVIDIA GPU and numba-cuda: the kernel on the GPU at 10,000 and 1,000,000
+   starts, and how far its sections end from the CPU's.
+5. With ``--studies``: the studies that march many starts, through the command line, timed: the
+   201 x 201 basin map at 1.2 sqrt(K/M), the default bifurcation diagram and the default fractions.
 
 Prints one JSON object. The load average before the run is part of it: other programs on the cores
-slow every figure.
+slow every figure; the CPU seconds of each march are given beside the wall time.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import subprocess
+
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
@@ -42,6 +46,7 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from piezo_fmu import Parameters  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, describe, device_error, settle  # noqa: E402
+from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble  # noqa: E402
 from piezo_fmu_harness import cli  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
 from piezo_fmu_harness.periodic.band import linear_transmissibility  # noqa: E402
@@ -61,16 +66,42 @@ def starts(count: int, omega: float) -> np.ndarray:
     return np.stack([p0, rng.uniform(-span * omega, span * omega, count), p0, np.zeros(count)], axis=1)
 
 
-def batch_rate(states: np.ndarray, drive: HarmonicHold, periods: int, device: str, keep: list | None = None) -> dict:
-    ens = Ensemble(Parameters(**VALUES), drive, states, device=device)
-    ens.advance(1)  # first touch: imports, device kernels
-    begin = time.perf_counter()
+#: Start-periods each throughput figure marches (the periods are this over the starts, at least 2).
+WORK = 200_000
+SIZES = (1, 100, 10_000, 100_000)
+
+
+def batch_rate(engine, states: np.ndarray, drive: HarmonicHold, device: str = "cpu", keep: list | None = None,
+               periods: int | None = None) -> dict:
+    periods = periods or max(2, WORK // len(states))
+    kwargs = {"device": device}
+    ens = engine(Parameters(**VALUES), drive, states, **kwargs)
+    ens.advance(1)  # first touch: imports, the compiled code
+    begin, cpu = time.perf_counter(), time.process_time()
     record = ens.advance(periods)
-    wall = time.perf_counter() - begin
+    wall, cpu = time.perf_counter() - begin, time.process_time() - cpu
     if keep is not None:
         keep.append(record)
-    return {"device": device, "starts": len(states), "periods": periods, "wall_s": wall,
+    return {"device": device, "starts": len(states), "periods": periods, "wall_s": wall, "cpu_s": cpu,
             "start_periods_per_s": len(states) * periods / wall}
+
+
+def compile_times() -> dict:
+    """Seconds a fresh process takes to march one start, with an empty kernel cache (it compiles)
+    and then with that cache (it loads)."""
+    code = ("import time; t = time.perf_counter()\n"
+            "from piezo_fmu import Parameters\n"
+            "from piezo_fmu.solver.batch import Ensemble, HarmonicHold\n"
+            "e = Ensemble(Parameters(), HarmonicHold(38.0, 1e-3), [(0.0, 0.0, 0.0, 0.0)])\n"
+            "e.advance(1); e.separate([[1e-9, 0, 0, 0]], [[1, 1, 1, 1]], [1e-9], 1)\n"
+            "print(time.perf_counter() - t)\n")
+    times = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(HERE.parent / "src"))
+        for name in ("first_call_s", "cache_warm_s"):
+            result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+            times[name] = float(result.stdout.split()[-1])
+    return times
 
 
 def same_motion(cpu: dict, gpu: dict) -> dict:
@@ -133,7 +164,7 @@ def studies(jobs: int) -> dict:
         with tempfile.TemporaryDirectory() as out:
             begin = time.perf_counter()
             status = cli.main([*argv, "--jobs", str(jobs), "--out", out, "--force"]
-                              + (["--no-progress"] if argv[0] != "bifurcation" else []))
+                              + ["--no-progress"])
             timed[name] = {"wall_s": time.perf_counter() - begin, "exit_status": status,
                            "summary": json.loads((Path(out) / "summary.json").read_text()) if status == 0 else None}
             summary = timed[name]["summary"] or {}
@@ -145,39 +176,37 @@ def studies(jobs: int) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--starts", type=int, default=10_000)
     parser.add_argument("--fmu-starts", type=int, default=8)
-    parser.add_argument("--periods", type=int, default=20)
+    parser.add_argument("--fmu-periods", type=int, default=20)
     parser.add_argument("--studies", action="store_true")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
     load = os.getloadavg()[0]
     omega = RATIO * W_N
     drive = HarmonicHold(omega, Y)
-    states = starts(args.starts, omega)
+    states = starts(max(SIZES), omega)
     model = FmuModel(default_fmu_path())
     unzipdir = model.extract()
     instance = Instance(model, unzipdir)
     try:
-        fmu = fmu_rate(instance, states[:args.fmu_starts], omega, args.periods)
-        marched: list = []
-        cpu = batch_rate(states, drive, args.periods, "cpu", marched)
-        small = batch_rate(states[:args.fmu_starts], drive, args.periods, "cpu")
+        fmu = fmu_rate(instance, states[:args.fmu_starts], omega, args.fmu_periods)
+        kernel = {n: batch_rate(Ensemble, states[:n], drive) for n in SIZES}
+        array = {n: batch_rate(ArrayEnsemble, states[:n], drive) for n in SIZES[:-1]}
+        rate = lambda run: run["start_periods_per_s"]  # noqa: E731
         report = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average_before": load,
-                  "fmu": fmu, "batch_cpu": cpu, "batch_cpu_same_starts_as_fmu": small,
-                  "speedup": cpu["start_periods_per_s"] / fmu["start_periods_per_s"],
-                  "speedup_same_starts": small["start_periods_per_s"] / fmu["start_periods_per_s"]}
+                  "fmu": fmu, "kernel_cpu": list(kernel.values()), "array_engine_cpu": list(array.values()),
+                  "kernel_over_array_engine": {n: rate(kernel[n]) / rate(array[n]) for n in array},
+                  "speedup": rate(kernel[10_000]) / rate(fmu), "single": rate(kernel[1]) / rate(fmu),
+                  "jit": compile_times()}
         report.update(agreement(instance, states[:args.fmu_starts], omega))
         if device_error("gpu") is None:
-            gpu = batch_rate(states, drive, args.periods, "gpu", marched)
-            big = batch_rate(starts(10 * args.starts, omega), drive, args.periods, "gpu")
-            report["batch_gpu"] = gpu
-            report["batch_gpu_10x"] = big
+            marched: list = []
+            batch_rate(Ensemble, states[:10_000], drive, "cpu", marched, periods=20)
+            report["kernel_gpu"] = [batch_rate(Ensemble, states[:10_000], drive, "gpu", marched, periods=20),
+                                    batch_rate(Ensemble, starts(1_000_000, omega), drive, "gpu", periods=10)]
             report["gpu_against_cpu"] = same_motion(*marched)
-            report["gpu_speedup"] = gpu["start_periods_per_s"] / fmu["start_periods_per_s"]
-            report["gpu_speedup_10x"] = big["start_periods_per_s"] / fmu["start_periods_per_s"]
         else:
-            report["batch_gpu"] = None
+            report["kernel_gpu"] = None
             report["gpu"] = device_error("gpu")
     finally:
         instance.free()

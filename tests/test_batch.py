@@ -18,6 +18,7 @@ import pytest
 
 from piezo_fmu import Parameters, Simulator
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, namespace
+from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble
 from piezo_fmu.solver.batch.orbits import OrbitFinder, free_for_ever, linear_orbit, scale_of
 from piezo_fmu.solver.batch.phases import BatchModel
 from piezo_fmu_harness.periodic.band import linear_transmissibility
@@ -104,13 +105,13 @@ def test_one_trajectory_alone_gives_the_bits_it_gives_in_a_batch_of_ten_thousand
 
 @pytest.mark.parametrize("voltage_model", [1, 2])
 def test_the_engine_needs_nothing_beyond_the_array_api_standard(voltage_model):
-    """Run on array-api-strict, which refuses whatever the standard does not define, the engine gives
-    numpy's bits: the code CuPy runs is the code the CPU tests cover."""
+    """Run on array-api-strict, which refuses whatever the standard does not define, the array engine
+    (the kernel's oracle) gives numpy's bits: the code CuPy runs is the code the CPU tests cover."""
     params = Parameters(voltage_model=voltage_model, R_load=3.59e6)
     drive = HarmonicHold(1.2 * W_N, 1e-3)
     starts = [(-4.545e-3, -0.0739, -4.545e-3, 0.0), (2e-3, 0.0, 2e-3, 0.0), (0.0, 0.1, 3e-3, 0.0)]
-    numpy_run = Ensemble(params, drive, starts).advance(8, observe=True)
-    strict_run = Ensemble(params, drive, starts, device="array-api-strict").advance(8, observe=True)
+    numpy_run = ArrayEnsemble(params, drive, starts).advance(8, observe=True)
+    strict_run = ArrayEnsemble(params, drive, starts, device="array-api-strict").advance(8, observe=True)
     assert numpy_run["impacts"].sum() > 0
     for name in numpy_run:
         assert np.array_equal(numpy_run[name], strict_run[name]), name

@@ -113,4 +113,5 @@ def batch_options(sub, confirm: int, confirm_where: str) -> None:
     sub.add_argument("--seed", type=int, default=None, metavar="S",
                      help="seed of the random starts and of the FMU's sample (default 0)")
     sub.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
-                     help="where the batch engine runs: numpy on the CPU, or CuPy on a GPU (default cpu)")
+                     help="where the batch engine's compiled kernel runs: every CPU core (numba), or an NVIDIA GPU "
+                          "(numba's CUDA target, package numba-cuda; default cpu)")

@@ -8,10 +8,15 @@ harmonic base motion, with the same physics, in closed form between events:
 - :mod:`.drive`: the base as the FMUs receive it (a first-order hold of N nodes a period);
 - :mod:`.phases`: free flight and contact in closed form, and the bounds that make event
   location rigorous;
-- :mod:`.events`: the next switch of each trajectory, located without a step that could jump it;
-- :mod:`.rounds`: a hold step's events, round by round, with the switch rules;
-- :mod:`.ensemble`: :class:`Ensemble`, many trajectories marched period by period;
-- :mod:`.namespace`: numpy on the CPU, or CuPy on a GPU (the array API standard);
+- :mod:`.kernel_source`: one trajectory through its hold steps as scalar code: free flight and
+  contact in closed form, the rigorous location of every switch, the switch rules;
+- :mod:`.kernel`: that source compiled with numba for the CPU and for a GPU (numba's CUDA target);
+  :mod:`.kernel_cache`, where its compiled code is kept;
+- :mod:`.ensemble`: :class:`Ensemble`, many trajectories marched a block of periods at a time on
+  the kernel;
+- :mod:`.array_ensemble`, :mod:`.events`, :mod:`.rounds`, :mod:`.namespace`: the array engine, the
+  same physics written with operations on arrays of the array API standard (numpy,
+  ``array-api-strict``, CuPy): the kernel's test oracle;
 - :mod:`.orbits`: Newton, verification and multipliers on the engine, the motion without impacts;
 - :mod:`.settle`: where each of many starts goes, by marching (the rule of issue 26);
 - :mod:`.trajectories`: a motion's Lyapunov exponent and modulation, and a start's track.
@@ -24,9 +29,20 @@ import dataclasses
 from ...model.parameters import Parameters
 from .drive import HarmonicHold
 from .ensemble import Ensemble
-from .namespace import DEVICES, device_error, namespace, to_numpy
+from .ensemble import DEVICES
+from .namespace import namespace, to_numpy
 from .settle import SettleSettings, Settled, describe, settle
 from .trajectories import tracks
+
+
+def device_error(device: str) -> str | None:
+    """Why the kernel cannot run on ``device`` here (None when it can)."""
+    if device not in DEVICES:
+        return f"device = {device!r} is not known; allowed values {DEVICES}"
+    if device == "gpu":
+        from .kernel import gpu_error
+        return gpu_error()
+    return None
 
 
 def damper(values: dict) -> Parameters:

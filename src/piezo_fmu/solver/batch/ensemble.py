@@ -1,22 +1,19 @@
-"""Many trajectories of one damper marched together, hold step by hold step, exactly.
+"""Many trajectories of one damper marched together, hold step by hold step, exactly, on the
+compiled kernel (:mod:`.kernel`, issue 32).
 
 An :class:`Ensemble` holds the state of ``n`` trajectories (``p, p', q, q'``, the phase, and the
-patch voltages under ``voltage_model = 2``) as arrays, each under its own harmonic base
-(:class:`~.drive.HarmonicHold`, all with the same nodes a period). A hold step is taken for all of
-them at once:
-
-1. **Free flight with no contact possible.** The closed form of free flight (:mod:`.phases`)
-   takes every free trajectory to the end of the step. The impact mass's distance from the
-   barriers is at most its larger value at the two ends plus ``B h^2 / 8`` in between (``B`` the
-   bound on its curvature): a trajectory that stays clear of both barriers by that margin is done.
-2. **The others** (in contact, or near a barrier) go through events one at a time: the next switch
-   is located on the closed form (:mod:`.events`), the state is moved there, the momentum-exact
-   switch rule applied (docs/model.md section 3), and so on to the end of the step. No Python loop
-   runs over trajectories: each round works on the arrays of those still inside the step.
+patch voltages under ``voltage_model = 2``), each under its own harmonic base
+(:class:`~.drive.HarmonicHold`, all with the same nodes a period). :meth:`Ensemble.advance` hands a
+whole block of periods to the kernel, which takes each trajectory through its hold steps with no
+Python in the loop: free flight in closed form where no contact is possible in a step, else event
+by event (the switch located rigorously on the closed form of the phase, the momentum-exact switch
+rule applied, docs/model.md section 3) to the step's end. A trajectory's cost does not depend on how
+many march with it, and it gives the same bits alone and in a batch.
 
 The base is the FMUs' first-order hold (:mod:`.drive`), so an ensemble marches the motion an FMU
 marched by the harness shows, and agrees with the scalar core (``piezo_fmu.solver.Simulator``) and
-the FMUs to rounding on orbits that are stable.
+the FMUs to rounding on orbits that are stable. The array engine (:mod:`.array_ensemble`), the same
+physics written with array operations, is the kernel's test oracle.
 """
 
 from __future__ import annotations
@@ -25,10 +22,47 @@ import numpy as np
 
 from ...model.parameters import Parameters
 from .drive import HarmonicHold
-from .events import EPS, NOISE_ULPS, ZERO
-from .namespace import namespace, to_numpy
 from .phases import BatchModel
-from .rounds import event_rounds
+
+#: The devices the kernel runs on: the CPU (numba) and an NVIDIA GPU (numba's CUDA target).
+DEVICES = ("cpu", "gpu")
+
+
+def checked(params: Parameters, model: BatchModel, drives, states, group, sides, volts) -> tuple:
+    """The arguments of an ensemble, checked (see :class:`Ensemble`): ``(drives, states, group,
+    sides, volts)`` as host arrays, ``volts`` (2, n) zeros when not given."""
+    drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
+    if not drives:
+        raise ValueError("drives: none given; allowed: one HarmonicHold or more")
+    samples = {drive.samples for drive in drives}
+    if len(samples) != 1:
+        raise ValueError(f"drives: samples {sorted(samples)} differ; allowed: one number of nodes a period for all")
+    states = np.asarray(states, dtype=float)
+    if states.ndim != 2 or states.shape[1] != 4:
+        raise ValueError(f"states: shape {states.shape}; allowed shape (n, 4): p, p', q, q' of each trajectory")
+    n = states.shape[0]
+    sides = np.zeros(n) if sides is None else np.asarray(sides, dtype=float)
+    if sides.shape != (n,) or not np.isin(sides, (-1.0, 0.0, 1.0)).all():
+        raise ValueError(f"sides: one of -1, 0, +1 per trajectory ({n}) is needed")
+    offset = states[:, 2] - states[:, 0]
+    slack = 1e-12 * params.d
+    inside = np.where(sides == 0.0, np.abs(offset) - model.half_gap <= slack,
+                      sides * offset - model.half_gap >= -slack)
+    bad = ~np.isfinite(states).all(axis=1) | ~inside
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        hg = model.half_gap
+        allowed = f"[{-hg:g}, {hg:g}] m" if sides[k] == 0 else f"[{hg:g}, inf) m times the side"
+        raise ValueError(f"states[{k}] = {states[k].tolist()} (side {int(sides[k])}): q - p = {float(offset[k])!r} m; "
+                         f"allowed range {allowed} (the impact mass inside the gap when free, at or beyond "
+                         f"the barrier it touches in contact), every value finite; {int(bad.sum())} of {n} "
+                         f"starts are not")
+    group = np.zeros(n, dtype=np.int64) if group is None else np.asarray(group, dtype=np.int64)
+    if group.shape != (n,) or (n and (group.min() < 0 or group.max() >= len(drives))):
+        raise ValueError(f"group: one index in [0, {len(drives) - 1}] per trajectory ({n}) is needed")
+    volts = np.zeros((2, n)) if volts is None else np.asarray(volts, dtype=float).reshape(2, n)
+    return drives, states, group, sides, volts
+
 
 class Ensemble:
     """``n`` trajectories of the damper ``params`` under harmonic base motion (see the module's text).
@@ -50,122 +84,65 @@ class Ensemble:
         Under ``voltage_model = 2``: the patch voltages (V) of the left and right barriers at the
         start (0 by default, as in the FMUs).
     device : str
-        "cpu" (numpy) or "gpu" (CuPy), :func:`~.namespace.namespace`.
+        "cpu" (numba, every core) or "gpu" (numba's CUDA target, one thread a trajectory).
     model : BatchModel, optional
         ``BatchModel.of(params)``, when the caller has it already.
     """
 
     def __init__(self, params: Parameters, drives, states, group=None, sides=None, volts=None, device: str = "cpu",
-                 model: BatchModel | None = None):
-        self.xp = xp = namespace(device)
+                 model: BatchModel | None = None, tables=None):
+        from . import kernel
+        if device not in DEVICES:
+            raise ValueError(f"device = {device!r} is not known; allowed values {DEVICES}")
+        if device == "gpu" and (error := kernel.gpu_error()):
+            raise ValueError(error)
         self.device = device
         self.model = model = model or BatchModel.of(params)
         self.params = params
-        drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
-        if not drives:
-            raise ValueError("drives: none given; allowed: one HarmonicHold or more")
-        samples = {drive.samples for drive in drives}
-        if len(samples) != 1:
-            raise ValueError(f"drives: samples {sorted(samples)} differ; allowed: one number of nodes a period for all")
-        self.drives, self.samples = drives, samples.pop()
-        states = np.asarray(states, dtype=float)
-        if states.ndim != 2 or states.shape[1] != 4:
-            raise ValueError(f"states: shape {states.shape}; allowed shape (n, 4): p, p', q, q' of each trajectory")
-        n = states.shape[0]
-        sides = np.zeros(n) if sides is None else np.asarray(sides, dtype=float)
-        if sides.shape != (n,) or not np.isin(sides, (-1.0, 0.0, 1.0)).all():
-            raise ValueError(f"sides: one of -1, 0, +1 per trajectory ({n}) is needed")
-        offset = states[:, 2] - states[:, 0]
-        slack = 1e-12 * params.d
-        inside = np.where(sides == 0.0, np.abs(offset) - model.half_gap <= slack,
-                          sides * offset - model.half_gap >= -slack)
-        bad = ~np.isfinite(states).all(axis=1) | ~inside
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            hg = model.half_gap
-            allowed = f"[{-hg:g}, {hg:g}] m" if sides[k] == 0 else f"[{hg:g}, inf) m times the side"
-            raise ValueError(f"states[{k}] = {states[k].tolist()} (side {int(sides[k])}): q - p = {float(offset[k])!r} m; "
-                             f"allowed range {allowed} (the impact mass inside the gap when free, at or beyond "
-                             f"the barrier it touches in contact), every value finite; {int(bad.sum())} of {n} "
-                             f"starts are not")
-        group = np.zeros(n, dtype=np.int64) if group is None else np.asarray(group, dtype=np.int64)
-        if group.shape != (n,) or (n and (group.min() < 0 or group.max() >= len(drives))):
-            raise ValueError(f"group: one index in [0, {len(drives) - 1}] per trajectory ({n}) is needed")
-        self.n = n
-        self.p, self.dp, self.q, self.dq = (xp.asarray(np.ascontiguousarray(states[:, j])) for j in range(4))
-        self.side = xp.asarray(sides)
-        if model.coupled:
-            volts = np.zeros((2, n)) if volts is None else np.asarray(volts, dtype=float).reshape(2, n)
-            self.volts = (xp.asarray(np.ascontiguousarray(volts[0])), xp.asarray(np.ascontiguousarray(volts[1])))
-        else:
-            self.volts = None  # the voltages do not act on the mechanics: not carried
-        self.failed = xp.zeros((n,), dtype=xp.bool)
+        drives, states, group, sides, volts = checked(params, model, drives, states, group, sides, volts)
+        self.drives, self.samples = drives, drives[0].samples
+        self.n = n = states.shape[0]
+        self._tables = tables or kernel.Tables(model, drives)
+        self._state = np.empty((7, n))
+        self._state[:4], self._state[4], self._state[5:] = states.T, sides, volts
+        self.failed = np.zeros(n, dtype=bool)
         self.group = group
-        self._set_drives(group)
-        self.step_index = 0  # hold steps taken within the present period
         self.periods = 0
-        self._q_inv_t = xp.asarray(model.contact.Q_inv.T)
-        self._q_t = xp.asarray(model.contact.Q.T)
-        self._lam = xp.asarray(model.contact.lam)
-        self._gain = xp.asarray(model.contact.gain)
-        self._lam2 = xp.asarray(np.abs(model.contact.lam) ** 2)
-
-    def _set_drives(self, group: np.ndarray) -> None:
-        xp, free = self.xp, self.model.free
-        tables = [drive.nodes() for drive in self.drives]
-        h = np.array([drive.step for drive in self.drives])
-        ec, es = free.coefficients(np, h)
-        decay = np.exp(-h / self.model.tau_e)
-        self._shared = len(self.drives) == 1
-        if self._shared:
-            (y, v), = tables
-            self._node_y, self._node_v = [float(x) for x in y], [float(x) for x in v]
-            self._h, self._ec, self._es, self._decay = float(h[0]), float(ec[0]), float(es[0]), float(decay[0])
-        else:
-            g = xp.asarray(group)
-            self._node_y = [xp.take(xp.asarray(np.array([t[0][k] for t in tables])), g) for k in range(self.samples + 1)]
-            self._node_v = [xp.take(xp.asarray(np.array([t[1][k] for t in tables])), g) for k in range(self.samples)]
-            self._h, self._ec, self._es, self._decay = (xp.take(xp.asarray(a), g) for a in (h, ec, es, decay))
 
     # ------------------------------------------------------------------ reading
     @property
     def states(self) -> np.ndarray:
-        """``(p, p', q, q')`` of every trajectory now, (n, 4), on the host."""
-        return np.stack([to_numpy(a) for a in (self.p, self.dp, self.q, self.dq)], axis=1)
-
-    def select(self, mask) -> "Ensemble":
-        """A new ensemble of the trajectories in ``mask`` (bool, (n,), host), in their present state
-        (phase and voltages included), at the start of a period."""
-        mask = np.asarray(mask, dtype=bool)
-        volts = None if self.volts is None else np.stack([to_numpy(v) for v in self.volts])[:, mask]
-        chosen = Ensemble(self.params, self.drives, self.states[mask], self.group[mask], self.sides[mask], volts,
-                          self.device, self.model)
-        chosen.periods = self.periods
-        return chosen
-
-    def assign(self, which, states, sides, volts=None) -> None:
-        """Put the trajectories in ``which`` (bool, (n,), host) into ``states`` ((count, 4)) on
-        ``sides`` (and, under ``voltage_model = 2``, ``volts`` (2, count)), unchecked: for a
-        companion a rounding's distance from a checked trajectory."""
-        xp = self.xp
-        which = xp.asarray(np.asarray(which, dtype=bool))
-        states = np.asarray(states, dtype=float)
-        for array, column in zip((self.p, self.dp, self.q, self.dq), states.T):
-            array[which] = xp.asarray(np.ascontiguousarray(column))
-        self.side[which] = xp.asarray(np.asarray(sides, dtype=float))
-        if self.volts is not None and volts is not None:
-            for array, column in zip(self.volts, np.asarray(volts, dtype=float)):
-                array[which] = xp.asarray(np.ascontiguousarray(column))
+        """``(p, p', q, q')`` of every trajectory now, (n, 4)."""
+        return np.ascontiguousarray(self._state[:4].T)
 
     @property
     def voltages(self) -> np.ndarray | None:
         """Under ``voltage_model = 2``, the patch voltages (V) now, (2, n): left, right; else None."""
-        return None if self.volts is None else np.stack([to_numpy(v) for v in self.volts])
+        return self._state[5:].copy() if self.model.coupled else None
 
     @property
     def sides(self) -> np.ndarray:
         """The phase of every trajectory now: 0 free, +1 or -1 in contact with that barrier."""
-        return to_numpy(self.side).astype(np.int64)
+        return self._state[4].astype(np.int64)
+
+    def select(self, mask) -> "Ensemble":
+        """A new ensemble of the trajectories in ``mask`` (bool, (n,)), in their present state (phase
+        and voltages included), at the start of a period."""
+        mask = np.asarray(mask, dtype=bool)
+        chosen = Ensemble(self.params, self.drives, self.states[mask], self.group[mask], self._state[4][mask],
+                          self._state[5:, mask], self.device, self.model, self._tables)
+        chosen.failed = self.failed[mask]
+        chosen.periods = self.periods
+        return chosen
+
+    def assign(self, which, states, sides, volts=None) -> None:
+        """Put the trajectories in ``which`` (bool, (n,)) into ``states`` ((count, 4)) on ``sides``
+        (and, under ``voltage_model = 2``, ``volts`` (2, count)), unchecked."""
+        which = np.asarray(which, dtype=bool)
+        self._state[:4, which] = np.asarray(states, dtype=float).T
+        self._state[4, which] = np.asarray(sides, dtype=float)
+        if self.model.coupled and volts is not None:
+            self._state[5:, which] = np.asarray(volts, dtype=float)
 
     # ------------------------------------------------------------------ marching
     def advance(self, periods: int, observe: bool = False) -> dict:
@@ -178,63 +155,42 @@ class Ensemble:
         nodes (the harness's measure). Trajectories whose events could not be located (never seen)
         are set aside as NaN and flagged in :attr:`failed`.
         """
-        if isinstance(periods, bool) or int(periods) != periods or periods < 1:
-            raise ValueError(f"periods = {periods!r} is out of range; allowed range [1, inf) (whole numbers)")
-        xp = self.xp
-        out = {"sections": [], "sides": [], "impacts": []}
-        if observe:
-            out.update(top=[], bottom=[])
-        for _ in range(int(periods)):
-            impacts = xp.zeros((self.n,), dtype=xp.int64)
-            top = bottom = self.p if observe else None
-            for k in range(self.samples):
-                p0, dp0 = self.p, self.dp
-                impacts = impacts + self._step(k)
-                if observe:
-                    high, low = hermite_extremes(xp, p0, dp0, self.p, self.dp, self._h)
-                    top, bottom = xp.maximum(top, high), xp.minimum(bottom, low)
-            self.periods += 1
-            out["sections"].append(self.states)
-            out["sides"].append(self.sides)
-            out["impacts"].append(to_numpy(impacts))
-            if observe:
-                out["top"].append(to_numpy(top))
-                out["bottom"].append(to_numpy(bottom))
-        return {name: np.stack(values) for name, values in out.items()}
+        from . import kernel
+        periods = whole(periods)
+        out = kernel.march(self.device, self._tables, self._state, self.failed, self.group, periods, observe)
+        self.periods += periods
+        if not observe:
+            del out["top"], out["bottom"]
+        return out
 
-    def _step(self, k: int):
-        """One hold step for all; returns the contact onsets of each trajectory in it."""
-        xp, model = self.xp, self.model
-        free = model.free
-        y0, v, h = self._node_y[k], self._node_v[k], self._h
-        p, dp, q, dq = self.p, self.dp, self.q, self.dq
-        u, du = p - y0, dp - v
-        u1, du1 = free.apply((self._ec, self._es), u, du)
-        end = y0 + v * h
-        p1, dp1, q1 = u1 + end, du1 + v, q + dq * h
-        bound = free.bound_rate * xp.sqrt(du * du + free.w2 * u * u)
-        reach = xp.maximum(xp.abs(q - p), xp.abs(q1 - p1)) + bound * (h * h / 8.0)
-        tol = NOISE_ULPS * EPS * (xp.abs(u) + xp.abs(q - y0) + model.half_gap)
-        margin = 2.0 * xp.maximum(tol, ZERO * 2.0 * model.half_gap)
-        event = (self.side != 0.0) | (reach >= model.half_gap - margin)
-        safe = ~event
-        self.p, self.dp, self.q = xp.where(safe, p1, p), xp.where(safe, dp1, dp), xp.where(safe, q1, q)
-        if self.volts is not None:
-            self.volts = tuple(xp.where(safe, volt * self._decay, volt) for volt in self.volts)
-        impacts = xp.zeros((self.n,), dtype=xp.int64)
-        if bool(xp.any(event)):
-            impacts[event] = self._events(event, y0, v, h)
-        return impacts
+    def separate(self, offset, scale, delta, periods: int) -> dict:
+        """March every trajectory ``periods`` periods beside a companion ``offset`` ((n, 4)) away, in
+        the same phase, brought back to the distance ``delta`` ((n,), m, distances weighted by
+        ``scale`` (n, 4)) along their separation after every period: the measure of the largest
+        Lyapunov exponent. Returns host arrays (periods, n): ``logs``, the log of each period's
+        stretch; ``samples``, ``p`` at each section; ``impacts``; ``top`` and ``bottom``; and
+        ``offset`` (n, 4), the companion's offset at the end."""
+        from . import kernel
+        periods = whole(periods)
+        offset = np.ascontiguousarray(np.asarray(offset, dtype=float).T)
+        out = kernel.separate(self.device, self._tables, self._state, self.failed, self.group, offset,
+                              np.asarray(scale, dtype=float).T, np.asarray(delta, dtype=float), periods)
+        self.periods += periods
+        out["offset"] = offset.T.copy()
+        return out
 
-    def _events(self, mask, y0, v, h):
-        """The trajectories in ``mask`` through their events to the end of the step; returns their
-        contact onsets."""
-        return event_rounds(self, mask, y0, v, h)
+
+def whole(periods) -> int:
+    """``periods`` checked: a whole number of periods, at least one."""
+    if isinstance(periods, bool) or int(periods) != periods or periods < 1:
+        raise ValueError(f"periods = {periods!r} is out of range; allowed range [1, inf) (whole numbers)")
+    return int(periods)
 
 
 def hermite_extremes(xp, p0, v0, p1, v1, h):
     """The largest and smallest value of the cubic Hermite interpolant between ``(p0, v0)`` and
-    ``(p1, v1)`` over a step ``h`` (s), ends included (``piezo_fmu_harness.periodic.drive``)."""
+    ``(p1, v1)`` over a step ``h`` (s), ends included (``piezo_fmu_harness.periodic.drive``), on
+    arrays of the namespace ``xp``."""
     m0, m1 = h * v0, h * v1
     a = 6.0 * (p0 - p1) + 3.0 * (m0 + m1)
     b = 6.0 * (p1 - p0) - 4.0 * m0 - 2.0 * m1

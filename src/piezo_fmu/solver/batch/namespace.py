@@ -55,11 +55,3 @@ def to_numpy(x) -> np.ndarray:
         return get()
     return np.from_dlpack(x)
 
-
-def device_error(device: str) -> str | None:
-    """Why ``device`` cannot run the engine here (None when it can)."""
-    try:
-        namespace(device)
-    except ValueError as error:
-        return str(error)
-    return None

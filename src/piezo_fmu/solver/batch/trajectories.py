@@ -57,42 +57,21 @@ def empty_measures(n: int) -> dict:
 
 def measure(ens: Ensemble, ids, measures: dict, scales, periods: int, finder) -> tuple:
     """Lyapunov exponent, modulation, impacts, amplitudes and line share of the trajectories left,
-    written into ``measures`` (:func:`statistics`): each is marched beside a companion
-    ``COMPANION`` of its size away, brought back to that distance (along the same direction) after
-    every period. Returns their states and phases at the end, and ``p`` at each section of the
-    window."""
+    written into ``measures`` (:func:`statistics`): each is marched beside a companion ``COMPANION``
+    of its size away, brought back to that distance (along the same direction) after every period
+    (:meth:`Ensemble.separate`). Returns their states and phases at the end, and ``p`` at each
+    section of the window."""
     m = len(ids)
-    states, sides, groups, volts = ens.states, ens.sides, ens.group, ens.voltages
+    states, groups = ens.states, ens.group
     direction = np.random.default_rng(0).standard_normal(4)
     direction /= np.linalg.norm(direction)
     scale = scales[groups]
     delta = COMPANION * np.maximum(np.abs(states * scale).max(axis=1), 1e-300)
-    pair = Ensemble(ens.params, ens.drives, np.concatenate([states, states]), np.concatenate([groups, groups]),
-                    np.concatenate([sides, sides]), None if volts is None else np.concatenate([volts, volts], axis=1),
-                    ens.device, ens.model)
-    companions = np.arange(2 * m) >= m
-    logs, tops, bottoms, counts, samples = [], [], [], [], []
-    offset = direction[None] * delta[:, None] / scale
-    for _ in range(periods):
-        pair.assign(companions, states + offset, sides, volts)
-        out = pair.advance(1, observe=True)
-        finder.cycles += 2 * m
-        now = pair.states
-        states, other = now[:m], now[m:]
-        samples.append(states[:, 0])
-        sides, volts = pair.sides[:m], None if volts is None else pair.voltages[:, :m]
-        gap = np.linalg.norm((other - states) * scale, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logs.append(np.log(gap / delta))
-            offset = (other - states) * (delta / gap)[:, None]
-        tops.append(out["top"][0, :m])
-        bottoms.append(out["bottom"][0, :m])
-        counts.append(out["impacts"][0, :m])
-    samples = np.array(samples)
-    for name, values in statistics(np.array(logs), np.array(tops), np.array(bottoms), np.array(counts),
-                                   samples).items():
+    out = ens.separate(direction[None] * delta[:, None] / scale, scale, delta, periods)
+    finder.cycles += 2 * m * periods
+    for name, values in statistics(out["logs"], out["top"], out["bottom"], out["impacts"], out["samples"]).items():
         measures[name][ids] = values
-    return states, sides, samples.T
+    return ens.states, ens.sides, out["samples"].T
 
 
 def statistics(logs, tops, bottoms, counts, samples) -> dict:

@@ -1,0 +1,188 @@
+"""The compiled kernel (issue 32): the source it is compiled from, run as Python, gives its bits; it
+marches the motion of the array engine (its oracle, the same physics written with array operations);
+the GPU's code is the same source, run here on numba's CUDA simulator; the Lyapunov measure marches
+the pair the array engine marched; and a copy of the package (an FMU's) finds the compiled code.
+
+The agreement with the scalar core and with the FMU, one trajectory alone against a batch of
+10,000, and grazing contacts are in ``test_batch.py``, which runs on the kernel.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from piezo_fmu import Parameters
+from piezo_fmu.solver.batch import Ensemble, HarmonicHold, device_error, kernel
+from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble
+from piezo_fmu.solver.batch.orbits import OrbitFinder, scale_of
+from piezo_fmu.solver.batch.phases import BatchModel
+
+ROOT = Path(__file__).resolve().parents[1]
+W_N = math.sqrt(1000.0)
+DAMPERS = {
+    "nominal": Parameters(voltage_model=1, R_load=3.59e6),
+    "coupled circuit": Parameters(voltage_model=2, R_load=3.59e6),
+    "stiff contact": Parameters(barrier_mode=1, voltage_model=0),
+}
+
+
+def random_starts(params, count, seed=0):
+    """Starts as ``fractions`` draws them: the main mass anywhere within a gap, the impact mass at
+    rest anywhere in the gap."""
+    rng = np.random.default_rng(seed)
+    d = params.d
+    p = rng.uniform(-d, d, count)
+    return np.column_stack([p, rng.uniform(-d * W_N, d * W_N, count), p + rng.uniform(-d / 2, d / 2, count),
+                            np.zeros(count)])
+
+
+def scaled_gap(a, b, omega):
+    return np.nanmax(np.abs((a - b) * np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])))
+
+
+@pytest.mark.parametrize("case", DAMPERS)
+def test_the_source_run_as_python_gives_the_compiled_kernels_bits(case):
+    """The scalar functions, uncompiled, march as the compiled kernel does, bit for bit: the
+    compiled code is the source, with nothing rearranged (no fast-math)."""
+    params = DAMPERS[case]
+    drive = HarmonicHold(1.25 * W_N, 1e-3)
+    starts = random_starts(params, 6)
+    compiled = Ensemble(params, drive, starts).advance(2, observe=True)
+    tables = kernel.Tables(BatchModel.of(params), [drive])
+    plain = kernel._compiled(lambda f: f, {})
+    n, periods = len(starts), 2
+    state = np.zeros((7, n))
+    state[:4] = starts.T
+    out = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
+           np.empty((periods, n)), np.empty((periods, n)))
+    for i in range(n):
+        plain["march_one"](True, i, state, np.zeros(n, bool), np.zeros(n, np.int64), *tables.arguments(), *out,
+                           np.empty(plain["WORK"]))
+    assert compiled["impacts"].sum() > 0
+    for name, values in zip(("sections", "sides", "impacts", "top", "bottom"), out):
+        assert np.array_equal(compiled[name], values), name
+
+
+@pytest.mark.parametrize("case", DAMPERS)
+def test_the_kernel_marches_the_array_engines_motion(case):
+    """From random starts (most impacting), one period on the kernel and on the array engine: the
+    same contact onsets and phases, the sections within rounding (the two differ only in the last
+    bits of cos, exp and the modal sums)."""
+    params = DAMPERS[case]
+    drive = HarmonicHold(1.25 * W_N, 1e-3)
+    starts = random_starts(params, 300, seed=1)
+    fast = Ensemble(params, drive, starts).advance(1, observe=True)
+    oracle = ArrayEnsemble(params, drive, starts).advance(1, observe=True)
+    assert (fast["impacts"] > 0).mean() > 0.5
+    assert np.array_equal(fast["impacts"], oracle["impacts"])
+    assert np.array_equal(fast["sides"], oracle["sides"])
+    assert scaled_gap(fast["sections"], oracle["sections"], drive.omega) < 1e-12
+    for name in ("top", "bottom"):
+        assert np.max(np.abs(fast[name] - oracle[name])) < 1e-12, name
+
+
+@pytest.mark.parametrize("case", DAMPERS)
+def test_on_a_stable_orbit_the_kernel_and_the_array_engine_agree_for_a_hundred_periods(case):
+    params = DAMPERS[case]
+    drive = HarmonicHold(1.2 * W_N, 1e-3)
+    finder = OrbitFinder(BatchModel.of(params), [drive], 1e-9 * drive.amplitude)
+    start = finder.march([[2e-3, 0.0, 2e-3, 0.0]], [0.0], [0], 200)["sections"][-1]
+    fast = Ensemble(params, drive, start).advance(100)
+    oracle = ArrayEnsemble(params, drive, start).advance(100)
+    assert fast["impacts"].min() >= 1
+    assert np.array_equal(fast["impacts"], oracle["impacts"])
+    assert scaled_gap(fast["sections"], oracle["sections"], drive.omega) < 1e-12
+
+
+def test_the_lyapunov_measure_marches_the_pair_the_array_engine_marched():
+    """``Ensemble.separate`` against the pair marched period by period on the array engine, the
+    companion put back along the separation after every period (the measure as it was written
+    before the kernel): the same log stretches."""
+    params = DAMPERS["nominal"]
+    drive = HarmonicHold(1.25 * W_N, 1e-3)
+    starts = random_starts(params, 5, seed=2)
+    scale = np.tile(scale_of(drive), (5, 1))
+    delta = 1e-8 * np.abs(starts * scale).max(axis=1)
+    direction = np.array([0.5, -0.5, 0.5, 0.5])
+    offset = direction[None] * delta[:, None] / scale
+    periods = 6
+    fast = Ensemble(params, drive, starts).separate(offset, scale, delta, periods)
+    pair = ArrayEnsemble(params, drive, np.concatenate([starts, starts]))
+    companions = np.arange(10) >= 5
+    logs = []
+    for _ in range(periods):
+        states, sides = pair.states[:5], pair.sides[:5]
+        pair.assign(companions, states + offset, sides)
+        pair.advance(1)
+        now = pair.states
+        gap = np.linalg.norm((now[5:] - now[:5]) * scale, axis=1)
+        logs.append(np.log(gap / delta))
+        offset = (now[5:] - now[:5]) * (delta / gap)[:, None]
+    assert np.max(np.abs(fast["logs"] - np.array(logs))) < 1e-5
+    assert np.max(np.abs(fast["samples"][-1] - pair.states[:5, 0])) < 1e-12
+
+
+def test_the_gpu_code_is_the_same_source_run_on_numbas_cuda_simulator(tmp_path):
+    """The GPU path (numba's CUDA target: one thread a trajectory, one launch a block of periods)
+    compiled from the same source, run on numba's CUDA simulator (CI has no GPU): the motion of
+    the CPU kernel."""
+    script = tmp_path / "gpu.py"
+    script.write_text(
+        "import json, math, sys\n"
+        "import numpy as np\n"
+        "from piezo_fmu import Parameters\n"
+        "from piezo_fmu.solver.batch import Ensemble, HarmonicHold\n"
+        "params = Parameters(voltage_model=2, R_load=3.59e6)\n"
+        "drive = HarmonicHold(1.25 * math.sqrt(1000.0), 1e-3)\n"
+        "starts = np.array(json.loads(sys.argv[1]))\n"
+        "runs = [Ensemble(params, drive, starts, device=d).advance(2, observe=True) for d in ('gpu', 'cpu')]\n"
+        "print(json.dumps({k: [runs[0][k].tolist(), runs[1][k].tolist()] for k in runs[0]}))\n")
+    starts = random_starts(DAMPERS["coupled circuit"], 3, seed=3)
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    result = subprocess.run([sys.executable, str(script), json.dumps(starts.tolist())], capture_output=True, text=True,
+                            env=env, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = json.loads(result.stdout.splitlines()[-1])
+    gpu, cpu = ({k: np.array(v[j]) for k, v in runs.items()} for j in (0, 1))
+    assert cpu["impacts"].sum() > 0
+    assert np.array_equal(gpu["impacts"], cpu["impacts"])
+    assert np.array_equal(gpu["sides"], cpu["sides"])
+    assert scaled_gap(gpu["sections"], cpu["sections"], 1.25 * W_N) < 1e-12
+
+
+def test_without_a_gpu_the_gpu_device_says_what_is_missing():
+    error = device_error("gpu")
+    assert error is not None and error.startswith("device = 'gpu': ") and "allowed devices here: 'cpu'" in error
+    with pytest.raises(ValueError, match="device = 'gpu': .*allowed devices here: 'cpu'"):
+        Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)], device="gpu")
+    with pytest.raises(ValueError, match=r"device = 'tpu' is not known; allowed values \('cpu', 'gpu'\)"):
+        Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)], device="tpu")
+
+
+def test_a_copy_of_the_package_finds_the_compiled_kernel_in_the_cache(tmp_path):
+    """A process that imports ``piezo_fmu`` from another folder (an FMU's unpacked copy) loads the
+    kernel that this one compiled instead of compiling it again."""
+    Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)]).advance(1)  # compiled or loaded
+    copy = tmp_path / "resources"
+    shutil.copytree(ROOT / "src" / "piezo_fmu", copy / "piezo_fmu", ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("import piezo_fmu, numpy as np\n"
+            "from piezo_fmu import Parameters\n"
+            "from piezo_fmu.solver.batch import Ensemble, HarmonicHold\n"
+            "assert piezo_fmu.__file__.startswith(%r), piezo_fmu.__file__\n"
+            "Ensemble(Parameters(), HarmonicHold(31.6, 1e-3), [(0.0, 0.0, 0.0, 0.0)]).advance(1)\n" % str(copy))
+    env = dict(os.environ, NUMBA_DEBUG_CACHE="1", PYTHONPATH=str(copy))
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600,
+                            cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    log = result.stdout + result.stderr
+    assert "data loaded" in log
+    assert "data saved" not in log, log[-3000:]
