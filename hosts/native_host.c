@@ -9,7 +9,7 @@
  * names, %.17g so that every double is written exactly).
  *
  *   native_host FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV]
- *                               [--set NAME=VALUE]... [--refusals] [--threads N]
+ *                               [--set NAME=VALUE]... [--refusals] [--threads N] [--also FMU_DIR2]
  *
  * FMU_DIR  the FMU archive extracted (modelDescription.xml, binaries/, resources/).
  * --stop   stop time in s (default: DefaultExperiment stopTime, else 1).
@@ -24,6 +24,9 @@
  *          same instance after its reset.
  * --threads N  N instances, each in a thread of its own, each running the whole case and
  *          writing OUT_CSV.1 ... OUT_CSV.N.
+ * --also   a second extracted FMU with the same variables (the standalone and the normal FMU of
+ *          one model, say), loaded into the same process before either is instantiated; the
+ *          same case then runs on it after the first, writing OUT_CSV.also.
  *
  * The communication grid is the one of OSP libcosim, which counts time in integer nanoseconds:
  * t_k = start + (k * step_ns) / 1e9 (the double nearest to k * step), and the step passed to
@@ -768,14 +771,26 @@ static void simulate(void *argument)
     if (fclose(out) != 0) die("cannot close %s", run->out_path);
 }
 
+/* Load the binary of the FMU extracted in `dir` (its absolute path into abs_dir). */
+static void *load_binary(const char *dir, const ModelDescription *md, char *abs_dir, size_t size)
+{
+    char library[PATH_MAX + 256];
+    if (!absolute_path(dir, abs_dir, size)) die("cannot resolve %s", dir);
+    snprintf(library, sizeof library, "%s/binaries/%s/%s%s", abs_dir, md->fmi_version == 2 ? PLATFORM2 : PLATFORM3,
+             md->model_identifier, LIBRARY_SUFFIX);
+    void *lib = open_library(library);
+    if (!lib) die("cannot load %s: %s", library, library_error());
+    return lib;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 3) {
         fprintf(stderr, "usage: %s FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV] "
-                        "[--set NAME=VALUE]... [--refusals] [--threads N]\n", argv[0]);
+                        "[--set NAME=VALUE]... [--refusals] [--threads N] [--also FMU_DIR2]\n", argv[0]);
         return 1;
     }
-    const char *fmu_dir = argv[1], *out_path = argv[2], *in_path = NULL;
+    const char *fmu_dir = argv[1], *out_path = argv[2], *in_path = NULL, *also_dir = NULL;
     double stop = NAN, step = 1e-3, start = 0.0;
     const char *sets[MAX_SETS];
     int nsets = 0, refusals = 0, threads = 0;
@@ -790,6 +805,7 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--start") == 0) start = strtod(argv[++i], NULL);
         else if (strcmp(argv[i], "--in") == 0) in_path = argv[++i];
         else if (strcmp(argv[i], "--threads") == 0) threads = atoi(argv[++i]);
+        else if (strcmp(argv[i], "--also") == 0) also_dir = argv[++i];
         else if (strcmp(argv[i], "--set") == 0) {
             if (nsets == MAX_SETS) die("too many --set");
             sets[nsets++] = argv[++i];
@@ -807,12 +823,15 @@ int main(int argc, char **argv)
     InputTable inputs = {0};
     if (in_path) read_inputs(in_path, md, &inputs);
 
-    char abs_dir[PATH_MAX], library[PATH_MAX + 256];
-    if (!absolute_path(fmu_dir, abs_dir, sizeof abs_dir)) die("cannot resolve %s", fmu_dir);
-    snprintf(library, sizeof library, "%s/binaries/%s/%s%s", abs_dir, md->fmi_version == 2 ? PLATFORM2 : PLATFORM3,
-             md->model_identifier, LIBRARY_SUFFIX);
-    void *lib = open_library(library);
-    if (!lib) die("cannot load %s: %s", library, library_error());
+    char abs_dir[PATH_MAX], also_abs[PATH_MAX];
+    void *lib = load_binary(fmu_dir, md, abs_dir, sizeof abs_dir), *also_lib = NULL;
+    ModelDescription *also_md = NULL;
+    if (also_dir) {
+        also_md = calloc(1, sizeof *also_md);
+        if (!also_md) die("out of memory");
+        parse_model_description(also_dir, also_md);
+        also_lib = load_binary(also_dir, also_md, also_abs, sizeof also_abs);
+    }
 
     Run runs[MAX_THREADS];
     for (int k = 0; k < (threads ? threads : 1); k++) {
@@ -826,6 +845,13 @@ int main(int argc, char **argv)
         for (int k = 0; k < threads; k++)
             if (!start_thread(&ids[k], simulate, &runs[k])) die("cannot start thread %d", k + 1);
         for (int k = 0; k < threads; k++) join_thread(ids[k]);
+    }
+    if (also_dir) {
+        Run also = {also_md, also_lib, also_abs, "", sets, nsets, &inputs, start, stop, step_ns,
+                    llround((stop - start) * 1e9) / step_ns, refusals};
+        snprintf(also.out_path, sizeof also.out_path, "%s.also", out_path);
+        simulate(&also);
+        free(also_md);
     }
     free(inputs.time);
     free(inputs.values);

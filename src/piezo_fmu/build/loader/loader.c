@@ -22,6 +22,11 @@
  *      path), PYTHONHOME is set if unset and the site-packages are added to the end of
  *      PYTHONPATH (a user's entries keep precedence, and a virtual environment's packages are
  *      found).
+ *    A standalone FMU carries its own CPython in resources/python/<PLATFORM_RUNTIME>/ (a file
+ *    library.txt there names its shared library, relative to that folder). In a process without
+ *    Python the loader tries it first: it loads that library and sets PYTHONHOME to the folder
+ *    (whatever it was: the runtime works with its own standard library only); if it cannot be
+ *    loaded, the routes above follow. The normal FMUs have no such folder and skip this.
  *    When none is usable, instantiation returns NULL after a message through the host's logger
  *    that says what was tried and what to set. Nothing goes to stdout or stderr.
  * 2. Statuses. pythonfmu's binary returns only OK, Discard (a step that returns False) or Fatal
@@ -276,11 +281,31 @@ static int extend_pythonpath(const char *entries)
     return ok;
 }
 
+/* Load the interpreter of `facts` into the process with its environment: PYTHONHOME (replaced
+ * when `own_home`, else set only if unset) and the site-packages at the end of PYTHONPATH. */
+static int install_python(const PythonFacts *facts, int own_home, char *why, size_t why_size)
+{
+    char reason[2048], home[8];
+    if (!platform_load_python(facts, reason, sizeof reason)) {
+        snprintf(why, why_size, "%s", reason);
+        return 0;
+    }
+    if ((own_home || !platform_getenv("PYTHONHOME", home, sizeof home)) && !platform_setenv("PYTHONHOME", facts->home)) {
+        snprintf(why, why_size, "cannot set PYTHONHOME");
+        return 0;
+    }
+    if (!extend_pythonpath(facts->packages)) {
+        snprintf(why, why_size, "cannot set PYTHONPATH");
+        return 0;
+    }
+    return 1;
+}
+
 /* The interpreter of one route in the process, or why not (0 and `why`). */
 static int use_python(const Route *route, char *why, size_t why_size)
 {
     PythonFacts facts;
-    char reason[2048], home[8];
+    char reason[2048];
     if (!ask_python(route, &facts, reason, sizeof reason)) {
         snprintf(why, why_size, "%s", reason);
         return 0;
@@ -293,28 +318,49 @@ static int use_python(const Route *route, char *why, size_t why_size)
         snprintf(why, why_size, "it cannot import numpy (%s)", facts.numpy_error);
         return 0;
     }
-    if (!platform_load_python(&facts, reason, sizeof reason)) {
-        snprintf(why, why_size, "%s", reason);
-        return 0;
-    }
-    if (!platform_getenv("PYTHONHOME", home, sizeof home) && !platform_setenv("PYTHONHOME", facts.home)) {
-        snprintf(why, why_size, "cannot set PYTHONHOME");
-        return 0;
-    }
-    if (!extend_pythonpath(facts.packages)) {
-        snprintf(why, why_size, "cannot set PYTHONPATH");
-        return 0;
-    }
-    return 1;
+    return install_python(&facts, 0, why, why_size);
 }
 
-/* Put a Python into the process: the first usable of the platform's routes, or say why none
- * was (returns 0 and sets `problem`). */
+/* The FMU's own runtime, if it carries one: 1 with its facts (the library that library.txt names,
+ * the folder as home; numpy is in its own site-packages), else 0. */
+static int own_runtime(PythonFacts *facts)
+{
+    char self[PATH_SIZE], name[PATH_SIZE] = "";
+    if (!platform_self_path(self, sizeof self)) return 0;
+    /* <FMU>/binaries/<platform>/<binary>: the FMU's folder is three separators up */
+    for (int i = 0; i < 3; i++) {
+        char *cut = strrchr(self, PLATFORM_DIR_SEPARATOR[0]);
+        if (!cut) return 0;
+        *cut = '\0';
+    }
+    int n = snprintf(facts->home, sizeof facts->home, "%s%sresources%spython%s%s", self, PLATFORM_DIR_SEPARATOR,
+                     PLATFORM_DIR_SEPARATOR, PLATFORM_DIR_SEPARATOR, PLATFORM_RUNTIME);
+    if (n < 0 || (size_t)n + sizeof "/library.txt" > sizeof facts->home) return 0;
+    char listing[PATH_SIZE + 16];
+    snprintf(listing, sizeof listing, "%s%slibrary.txt", facts->home, PLATFORM_DIR_SEPARATOR);
+    FILE *file = fopen(listing, "r");
+    if (!file) return 0;
+    int read = fgets(name, sizeof name, file) != NULL;
+    fclose(file);
+    name[strcspn(name, "\r\n")] = '\0';
+    if (!read || !*name) return 0;
+    n = snprintf(facts->library, sizeof facts->library, "%s%s%s", facts->home, PLATFORM_DIR_SEPARATOR, name);
+    facts->packages[0] = facts->numpy_error[0] = '\0';
+    return n > 0 && (size_t)n < sizeof facts->library;
+}
+
+/* Put a Python into the process: the FMU's own runtime if it has one, else the first usable of
+ * the platform's routes, or say why none was (returns 0 and sets `problem`). */
 static int provide_python(void)
 {
     if (platform_python_in_process()) return 1; /* the host has Python: use it */
     static Route routes[MAX_ROUTES];
+    static PythonFacts own;
     char missing[PATH_SIZE], tried[PROBLEM_SIZE / 2] = "", why[2048];
+    if (own_runtime(&own)) {
+        if (install_python(&own, 1, why, sizeof why)) return 1;
+        snprintf(tried, sizeof tried, "tried the FMU's own Python (%.1500s): %.2000s", own.home, why);
+    }
     int count = platform_routes(routes, missing, sizeof missing);
     for (int i = 0; i < count; i++) {
         if (use_python(&routes[i], why, sizeof why)) return 1;

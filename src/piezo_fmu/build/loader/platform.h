@@ -34,6 +34,9 @@ typedef struct {
 extern const char PLATFORM_LIBRARY_SUFFIX[];   /* ".so" or ".dll" */
 extern const char PLATFORM_REAL_SUFFIX[];      /* ".pythonfmu.so" or ".pythonfmu.dll" */
 extern const char PLATFORM_PATH_SEPARATOR[];   /* ":" or ";" */
+extern const char PLATFORM_DIR_SEPARATOR[];    /* "/" or "\\" */
+/* The folder of a standalone FMU's own runtime under resources/python/ ("linux64", "win64"). */
+extern const char PLATFORM_RUNTIME[];
 /* What to set when no Python was usable. */
 extern const char PLATFORM_ADVICE[];
 

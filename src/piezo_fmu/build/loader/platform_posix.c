@@ -29,6 +29,8 @@ extern char **environ;
 const char PLATFORM_LIBRARY_SUFFIX[] = ".so";
 const char PLATFORM_REAL_SUFFIX[] = ".pythonfmu.so";
 const char PLATFORM_PATH_SEPARATOR[] = ":";
+const char PLATFORM_DIR_SEPARATOR[] = "/";
+const char PLATFORM_RUNTIME[] = "linux64";
 const char PLATFORM_ADVICE[] = "Set PIEZO_FMU_PYTHON=/path/to/python, a Python 3 built with --enable-shared that "
                                "can import numpy (for example a virtual environment's bin/python).";
 

@@ -26,6 +26,8 @@
 const char PLATFORM_LIBRARY_SUFFIX[] = ".dll";
 const char PLATFORM_REAL_SUFFIX[] = ".pythonfmu.dll";
 const char PLATFORM_PATH_SEPARATOR[] = ";";
+const char PLATFORM_DIR_SEPARATOR[] = "\\";
+const char PLATFORM_RUNTIME[] = "win64";
 const char PLATFORM_ADVICE[] = "Set PIEZO_FMU_PYTHON=C:\\path\\to\\python.exe, a Python 3 that can import numpy "
                                "(for example a virtual environment's Scripts\\python.exe), or put one on PATH.";
 
