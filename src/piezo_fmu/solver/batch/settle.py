@@ -68,7 +68,8 @@ class SettleSettings:
     block : int
         Periods between two looks at the trajectories.
     max_order : int
-        Longest orbit looked for, in forcing periods.
+        Longest orbit looked for, in forcing periods (16: past the Neimark-Sacker point, at
+        1.325 ``w_n``, the motion locks on the torus to a stable orbit of order 13).
     classify_cycles : int
         Periods over which an undecided motion is measured (its exponent's interval needs a long
         window: the batch means of ten batches).
@@ -79,7 +80,7 @@ class SettleSettings:
     tolerance: float = 1e-6
     max_cycles: int = 1000
     block: int = 20
-    max_order: int = 4
+    max_order: int = 16
     classify_cycles: int = 200
     seeds: int = 4
 
@@ -320,7 +321,8 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
         found = finder.verify(x[converged], sides[-1][seeds][converged], groups[seeds][converged], order)
         fresh: list = []
         for orbit in found:
-            if orbit is not None and not _known(state.attractors + state.unstable + fresh, orbit, scales,
+            # an orbit without impacts is the neutral family's: only the proof labels it (free_for_ever)
+            if orbit is not None and sum(orbit.impacts) and not _known(state.attractors + state.unstable + fresh, orbit, scales,
                                                 finder.tolerance):
                 fresh.append(orbit)
         if not fresh:
