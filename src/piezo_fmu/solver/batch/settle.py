@@ -52,7 +52,7 @@ RATE_SLACK = 0.02
 #: Returns of a seed for Newton: within this fraction of the size, and shrinking.
 SEED_REACH = 0.1
 #: The labels of the starts that are on no orbit (see :class:`Settled`).
-UNDECIDED, SET_ASIDE, CHAOTIC, QUASI_PERIODIC = -1, -2, -3, -4
+UNDECIDED, SET_ASIDE = -1, -2
 
 
 @dataclass(frozen=True)
@@ -99,8 +99,9 @@ class Settled:
 
     ``labels``: index into ``attractors`` (an :class:`~.orbits.Orbit` or a :class:`Quiet`),
     :data:`UNDECIDED` (-1) for a start the budget did not resolve, :data:`SET_ASIDE` (-2) for a
-    trajectory the engine set aside (the labels :data:`CHAOTIC` (-3) and :data:`QUASI_PERIODIC` (-4)
-    are the callers', for undecided starts shown to persist); ``periods``: periods marched when the
+    trajectory the engine set aside (whether undecided starts persist, chaotic or quasi-periodic, is
+    the caller's to judge from all the starts of a drive; the harness's records then say so by their
+    ``kind``); ``periods``: periods marched when the
     label was given (``max_cycles`` for the others: the budget); for the undecided starts:
     ``exponent`` with ``exponent_low``/``exponent_high`` (1/period, 95%), ``modulation``,
     ``impacts_per_cycle``, ``amplitude``, ``amplitude_min``, ``amplitude_max`` (m) and
