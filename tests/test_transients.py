@@ -137,3 +137,26 @@ def test_a_negative_exponent_is_never_chaotic_whatever_the_plateau():
         record = {"exponent": exponent, "exponent_low": 2 * exponent, "exponent_high": 0.5 * exponent,
                   "line_share": 1.0}
         assert verdict(record, Plateau()) == "undecided (converging)"
+
+
+def test_the_window_measures_bound_the_exponent_and_tell_a_line_spectrum_from_a_broad_one():
+    """The statistics the verdict reads (``piezo_fmu.solver.batch.trajectories``): per-period log
+    stretches of mean 0.3 and of mean -0.02 give exponents whose 95% intervals hold their means and
+    exclude 0; section samples on two incommensurate lines have a line share above 0.9, white noise
+    one well below it."""
+    from piezo_fmu.solver.batch.trajectories import line_share, statistics
+
+    rng = np.random.default_rng(4)
+    periods = 200
+    logs = np.stack([0.3 + rng.normal(0, 0.5, periods), -0.02 + rng.normal(0, 0.02, periods)], axis=1)
+    k = np.arange(periods)[:, None]
+    lines = 1e-3 * (np.sin(2 * np.pi * 0.1234 * k) + 0.5 * np.sin(2 * np.pi * 0.3071 * k))
+    noise = 1e-3 * rng.normal(0, 1, (periods, 1))
+    samples = np.concatenate([lines, noise], axis=1)
+    ones = np.ones((periods, 2))
+    m = statistics(logs, 2e-3 * ones, -2e-3 * ones, 2 * ones, samples)
+    assert m["exponent_low"][0] < 0.3 < m["exponent_high"][0] and m["exponent_low"][0] > 0
+    assert m["exponent_low"][1] < -0.02 < m["exponent_high"][1] < 0
+    assert m["line_share"][0] > 0.9 > 0.5 > m["line_share"][1]
+    assert (m["impacts_per_cycle"] == 2).all() and (m["modulation"] == 0).all()
+    assert np.isnan(line_share(samples[:10])).all()
