@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ...drawing import new_figure, save_png
 
 
@@ -27,10 +29,10 @@ def draw(ds, path: Path) -> Path:
     ax.set_ylabel("initial displacement p0 (mm)")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1)
     ax.set_title(f"Basins of attraction at w/w_n = {ds.attrs['ratio']:g} (impact mass at rest in the middle)", fontsize=9)
-    periods = ds["periods"].values.astype(float)
+    periods = np.maximum(ds["periods"].values.astype(float), 1.0)  # a start labelled at once: drawn as 1
     mesh = right.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, periods, shading="nearest", cmap="magma_r",
-                            norm=LogNorm(vmin=max(1.0, float(periods.min())), vmax=max(2.0, float(periods.max()))))
-    fig.colorbar(mesh, ax=right, label="periods to reach the motion (the budget: undecided)")
+                            norm=LogNorm(vmin=1.0, vmax=max(2.0, float(periods.max()))))
+    fig.colorbar(mesh, ax=right, label="periods to reach the motion (1: at once; the budget: undecided)")
     right.set_xlabel("initial velocity of the main mass p0' (m/s)")
     right.set_title(f"How long the transient lasts (budget {ds.attrs.get('budget_periods', '?')} periods)", fontsize=9)
     return save_png(fig, path)
