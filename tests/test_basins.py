@@ -88,6 +88,18 @@ def test_shares_add_to_one_and_the_two_impact_orbit_takes_more_than_nine_starts_
     assert (basins / "basins.png").stat().st_size > 0
 
 
+def test_the_map_says_how_long_each_start_took_and_that_the_budget_left_none_undecided(basins, summary):
+    """Issue 31: the transient's length beside the map. At 1.2 w_n every start reaches one of the two
+    motions well within the budget: none is undecided, and the survival fit has no plateau."""
+    ds = open_dataset(basins / "basins.nc")
+    periods = ds["periods"].values
+    assert ds.attrs["budget_periods"] == summary["budget_periods"] == 6000
+    assert periods.shape == (15, 15) and 0 < periods.max() < summary["budget_periods"]
+    assert summary["undecided"] == {"starts": 0, "share": 0.0}
+    fit = summary["transients"]
+    assert fit["undecided"] == 0 and not fit["persists"] and fit["resolved"] == fit["at_risk"]
+
+
 def test_the_boundary_is_measured(summary):
     edge = summary["boundary"]
     assert 0.0 < edge["boundary_fraction"] < 0.5

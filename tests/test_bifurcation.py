@@ -1,15 +1,18 @@
-"""The bifurcation diagram (issues 23, 27): section samples and impacts per cycle, up and down, on the
-batch engine, every motion that does not settle classified, a sample of points checked through the
-FMU; bad input refused before any run."""
+"""The bifurcation diagram (issues 23, 27, 31): section samples and impacts per cycle, up and down, on
+the batch engine, a point called chaotic only where its motion persists (shown through the FMU too:
+it persists over a march twice the budget and parts from a neighbour start at a positive rate), a
+sample of points checked through the FMU; bad input refused before any run."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fmpy_march import Marcher, settled
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
@@ -22,8 +25,8 @@ FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
 @pytest.fixture(scope="module")
 def diagram(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bifurcation")
-    assert run_cli("bifurcation", "--ratio-min", 0.98, "--ratio-max", 1.02, "--count", 3, "--jobs", 2, "--out", out,
-                   "--fmu", FMU) == 0
+    assert run_cli("bifurcation", "--ratio-min", 0.98, "--ratio-max", 1.02, "--count", 3, "--max-cycles", 400,
+                   "--jobs", 2, "--out", out, "--fmu", FMU) == 0
     return out
 
 
@@ -38,10 +41,9 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
             assert 1 <= samples[where] <= 4  # an orbit of order n gives its n samples
             assert np.isnan(ds["lyapunov_exponent"].values[where])
         else:
-            assert samples[where] == 40
-            # An exponent, unless the impact mass was in contact at every section (chatter).
-            assert np.isfinite(ds["lyapunov_exponent"].values[where]) == (motion[where] != "unclassified")
-    # At w_n the default damper's motion is chaotic, sweeping either way (see tests/test_motion.py).
+            assert samples[where] == 40 and np.isfinite(ds["lyapunov_exponent"].values[where])
+            assert ds["periods"].values[where] == ds.attrs["budget_periods"]
+    # At w_n the default damper's motion is chaotic, sweeping either way: its cloud persists.
     assert (ds["motion"].sel(omega=ds["omega"].values[1]).values == "chaotic").all()
     summary = json.loads((diagram / "summary.json").read_text())
     assert sum(c["count"] for d in summary["classes"].values() for c in d.values()) == 6
@@ -54,6 +56,38 @@ def test_the_fmu_checked_every_kind_of_motion_the_diagram_shows_and_none_disagre
     assert checks["disagree"] == 0 and checks["agree"] + checks["parted"] == checks["checked"]
     shown = {kind for classes in summary["classes"].values() for kind in classes}
     assert {c["motion"] for c in checks["points"] if c["verdict"] == "agrees"} == shown
+
+
+def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neighbour_through_the_fmu(diagram):
+    """Issue 31: chaos is a claim that needs evidence. Every chaotic point's cloud persisted and its
+    exponent's interval lies above 0; through the FMU marched with fmpy alone from the point's start,
+    the motion never settles over twice the budget, and a start moved by 1e-9 of itself parts from
+    it at a positive rate, to the motion's own size."""
+    saved = json.loads((diagram / "points.json").read_text())
+    points = [p for sweep in saved["sweeps"] for p in sweep["points"]]
+    chaotic = [p for p in points if p["motion"] == "chaotic"]
+    assert chaotic
+    for p in points:
+        if p["motion"] != "periodic":
+            assert (p["motion"] == "chaotic") == (p["transients"]["persists"] and p["exponent_low"] > 0)
+    budget = json.loads((diagram / "summary.json").read_text())["budget_periods"]
+    point = chaotic[0]
+    values = saved["values"]
+    marcher = Marcher(FMU)
+    try:
+        start = np.array(point["start"])
+        run = marcher.march(values, point["omega"], point["amplitude_Y"], start, 2 * budget)
+        windows = [{"sections": run["sections"][k - 40:k]} for k in range(budget, 2 * budget + 1, 100)]
+        assert not any(settled(w, point["omega"]) for w in windows)
+        assert (run["onsets"][budget:] > 0).mean() > 0.1  # still impacting to the end
+        moved = marcher.march(values, point["omega"], point["amplitude_Y"], start * (1 + 1e-9), 100)
+        scale = np.array([1.0, 1.0 / point["omega"], 1.0, 1.0 / point["omega"]])
+        gap = np.abs((moved["sections"] - run["sections"][:100]) * scale).max(axis=1)
+        assert gap.max() > 1e-4
+        early = gap[: int(np.argmax(gap > 1e-6))]
+        assert len(early) > 1 and math.log(early[-1] / early[0]) / (len(early) - 1) > 0.05
+    finally:
+        marcher.close()
 
 
 @pytest.mark.parametrize("argv, words", [

@@ -99,7 +99,7 @@ def test_the_three_impact_orbit_at_resonance_is_unstable_and_is_not_the_response
     if record["settled"]:
         assert record["stable"] and record["max_multiplier"] < 1.0
     else:
-        assert record["verdict"] == "not periodic" and record["order"] is None
+        assert record["verdict"] == "undecided" and record["order"] is None
         assert record["amplitude_min"] <= record["amplitude_max"] <= 2 * record["amplitude"]
 
 
@@ -164,7 +164,7 @@ def test_the_results_carry_multipliers_verdicts_and_the_unstable_orbits(band_stu
     settled = ds["settled"].values == 1
     moduli = np.hypot(ds["multiplier_real"].values, ds["multiplier_imag"].values).max(axis=-1)
     assert np.all(moduli[settled] <= 1.0 + 1e-3)
-    assert set(np.unique(ds["verdict"].values)) <= {"stable", "not periodic"}
+    assert set(np.unique(ds["verdict"].values)) <= {"stable", "undecided"}
     assert np.all((ds["verdict"].values == "stable") == settled)
     assert np.all(ds["max_multiplier"].values[settled] < 1.0)
     assert np.all(ds["unstable_max_multiplier"].values[ds["unstable_verdict"].values == "unstable"] > 1.0)

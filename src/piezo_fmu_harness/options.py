@@ -101,7 +101,8 @@ def many_start_options(sub, max_cycles: int, confirm: int, confirm_where: str) -
             ("--voltage-model", int, "N", "0, 1 or 2 (default 1)"),
             ("--samples", int, "N", "communication steps per forcing period (default 64)"),
             ("--tolerance", float, "TOL", "steady state: the section returns within TOL * Y (default 1e-6)"),
-            ("--max-cycles", int, "N", f"forcing periods a start is marched at most (default {max_cycles})")):
+            ("--max-cycles", int, "N", f"the budget: forcing periods a start is marched at most; one not resolved by "
+                                       f"then is reported undecided (default {max_cycles})")):
         sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
     batch_options(sub, confirm, confirm_where)
 

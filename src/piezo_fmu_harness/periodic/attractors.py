@@ -10,12 +10,16 @@ one list per drive (``group``):
   states agree (a point of one within :data:`SAME` of ``Y`` of a point of the other): an
   asymmetric orbit and its mirror image stay two attractors;
 - the motion without impacts is one attractor per drive (the family where the impact mass rests);
-- the starts that reach no orbit within the cap on periods are one attractor per drive, a motion
-  that is not periodic, classified (:func:`piezo_fmu_harness.periodic.motion.kind`: chaotic,
-  quasi-periodic, strongly modulated, or a transient still converging) by the median of its starts'
-  largest Lyapunov exponents and modulations: one start's estimate over a finite window scatters
-  about a threshold, the attractor's class should not. Two motions that are not periodic at one
-  frequency are therefore not told apart.
+- the starts that reach no orbit within the budget of periods (issue 31) are **undecided**, never
+  folded into an attractor, unless the drive's survival curve shows that what is left persists
+  (:func:`piezo_fmu_harness.periodic.transients.escape`: a plateau, the transient died out, the
+  curve flat at its end). Then a start is **chaotic** when its largest Lyapunov exponent is positive
+  with a 95% interval that excludes 0, **quasi-periodic** when the interval holds 0 (or the exponent
+  is within :data:`NEAR_ZERO` of it) and its section's spectrum is a few lines (line share at least
+  :data:`LINES`); any other stays undecided. Each is one record per drive (``kind`` "chaotic",
+  "quasi-periodic" or "undecided"), with the median of its starts' measures; an undecided record's
+  ``motion`` says "converging" when that median exponent's interval lies below 0. Two chaotic
+  motions at one frequency are not told apart.
 
 **Shares** are the fractions of the starts that end on each attractor, with the 95% Wilson score
 interval of a binomial proportion (for a grid of starts, as if its cells were a random sample).
@@ -33,13 +37,19 @@ import math
 
 import numpy as np
 
-from .motion import kind
+from .transients import counts, escape
 
 #: Two orbit records of one drive are the same attractor when a section state of one lies within
 #: this many ``Y`` of one of the other's (the batch engine's orbits are within 1e-6 Y of exact).
 SAME = 1e-4
 #: z of a two-sided 95% interval.
 Z95 = 1.959963984540054
+#: The kinds of record of the starts that are on no orbit.
+NOT_PERIODIC = ("chaotic", "quasi-periodic", "undecided")
+#: An exponent (1/period) this close to 0 is 0 for a quasi-periodic motion ...
+NEAR_ZERO = 0.005
+#: ... whose section's spectrum holds at least this share of its variance in a few lines.
+LINES = 0.9
 
 
 def wilson(count: int, total: int, z: float = Z95) -> tuple[float, float]:
@@ -64,7 +74,7 @@ def same(a: dict, b: dict, omega: float, amplitude: float) -> bool:
     """Whether two attractor records of one drive (``omega`` rad/s, ``Y`` m) are one attractor."""
     if a["group"] != b["group"] or a["kind"] != b["kind"]:
         return False
-    if a["kind"] != "orbit":  # one motion without impacts, one not periodic, per drive
+    if a["kind"] != "orbit":  # one motion without impacts, one of each kind on no orbit, per drive
         return True
     return (a["order"] == b["order"] and sorted(a["impacts"]) == sorted(b["impacts"])
             and _scaled_gap(a["sections"], b["sections"], omega) <= SAME * amplitude)
@@ -75,7 +85,9 @@ def merge(chunks: list[dict], drives: list[tuple[float, float]]) -> tuple[list[d
     ``attractor`` (the index into that list) added. ``drives``: ``(omega, Y)`` of each group.
 
     A chunk is ``{"starts": [{"index", "group", "label", "periods", ...}], "attractors": [...]}``
-    (label -1: not periodic, with its measures; -2: set aside by the engine).
+    (label -1: undecided at the budget, with its measures; -2: set aside by the engine). The
+    undecided starts of a drive are judged together (see the module's text); each start's record
+    gains its ``motion``.
     """
     found: list[dict] = []
     starts: dict[int, dict] = {}
@@ -88,31 +100,80 @@ def merge(chunks: list[dict], drives: list[tuple[float, float]]) -> tuple[list[d
         found.append({**record})
         return len(found) - 1
 
+    pending: list[dict] = []
     for chunk in chunks:
         local = [place(record) for record in chunk["attractors"]]
         for record in chunk["starts"]:
             if record["label"] >= 0:
-                target = local[record["label"]]
+                starts[record["index"]] = {**record, "attractor": local[record["label"]], "motion": "periodic"}
             elif record["label"] == -1:
-                target = place({"kind": "not periodic", "group": record["group"]})
+                pending.append(record)
             else:
-                target = place({"kind": "set aside", "group": record["group"]})
-            starts[record["index"]] = {**record, "attractor": target}
-    _not_periodic_measures(found, starts)
+                starts[record["index"]] = {**record, "attractor": place({"kind": "set aside", "group": record["group"]}),
+                                           "motion": "set aside"}
+    fits = {}
+    for record in pending:
+        group = record["group"]
+        if group not in fits:
+            fits[group] = survival_fit([r for r in chunk_starts(chunks) if r["group"] == group])
+        motion = verdict(record, fits[group])
+        kind_ = motion if motion in NOT_PERIODIC else "undecided"
+        starts[record["index"]] = {**record, "attractor": place({"kind": kind_, "group": group}), "motion": motion}
+    _not_periodic_measures(found, starts, fits)
     return found, starts
 
 
-def _not_periodic_measures(found: list[dict], starts: dict) -> None:
-    """The median measures of the starts on each motion that is not periodic, and its class."""
+def chunk_starts(chunks: list[dict]):
+    for chunk in chunks:
+        yield from chunk["starts"]
+
+
+def survival_fit(records: list[dict]):
+    """The fit of the survival curve (:func:`~.transients.escape`) of one drive's start records
+    (``label``, ``periods``; the set aside ones left out), or None when none was resolved late
+    enough to need one: no start undecided."""
+    counted = [r for r in records if r["label"] != -2]
+    undecided = [r["periods"] for r in counted if r["label"] < 0]
+    if not undecided:
+        return None
+    budget = max(undecided)
+    return escape([min(r["periods"], budget) for r in counted], [r["label"] >= 0 for r in counted], budget)
+
+
+def verdict(record: dict, fit) -> str:
+    """What an undecided start is, given its drive's survival fit: "chaotic", "quasi-periodic",
+    "undecided (converging)" (its exponent's interval below 0) or "undecided"."""
+    low, high, value = record.get("exponent_low"), record.get("exponent_high"), record.get("exponent")
+    if high is not None and high < 0:
+        return "undecided (converging)"
+    if fit is None or not fit.persists or value is None:
+        return "undecided"
+    if low is not None and low > 0:
+        return "chaotic"
+    near = abs(value) <= NEAR_ZERO or (low is not None and low <= 0 <= high)
+    if near and (record.get("line_share") or 0.0) >= LINES:
+        return "quasi-periodic"
+    return "undecided"
+
+
+def _not_periodic_measures(found: list[dict], starts: dict, fits: dict) -> None:
+    """The median measures of the starts of each record on no orbit, the drive's survival fit, and
+    the record's ``motion``."""
     for k, attractor in enumerate(found):
-        if attractor["kind"] != "not periodic":
+        if attractor["kind"] not in NOT_PERIODIC:
             continue
         members = [r for r in starts.values() if r["attractor"] == k]
-        for name in ("amplitude", "amplitude_min", "amplitude_max", "impacts_per_cycle", "exponent", "modulation"):
+        for name in ("amplitude", "amplitude_min", "amplitude_max", "impacts_per_cycle", "exponent", "exponent_low",
+                     "exponent_high", "modulation", "line_share"):
             values = [r[name] for r in members if r.get(name) is not None]
             attractor[name] = float(np.median(values)) if values else None
-        attractor["motion"] = (kind(attractor["exponent"], attractor["modulation"])
-                               if attractor["exponent"] is not None else "unclassified")
+        fit = fits.get(attractor["group"])
+        attractor["transients"] = counts(fit) if fit is not None else None
+        if attractor["kind"] == "undecided":
+            converging = attractor["exponent_high"] is not None and attractor["exponent_high"] < 0
+            attractor["motion"] = "undecided (converging)" if converging else "undecided"
+        else:
+            attractor["motion"] = attractor["kind"]
 
 
 def shares(found: list[dict], starts: dict, group: int) -> list[dict]:
@@ -161,8 +222,8 @@ def base_name(attractor: dict) -> str:
     motion that is not periodic."""
     if attractor["kind"] == "orbit":
         return f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle"
-    if attractor["kind"] == "not periodic":
-        return f"{attractor['motion']} (not periodic)"
+    if attractor["kind"] in ("chaotic", "quasi-periodic"):
+        return f"{attractor['kind']} (persists)"
     return attractor["kind"]
 
 

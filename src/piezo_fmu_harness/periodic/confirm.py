@@ -12,9 +12,12 @@ sections:
   orbit shrinks and ends within :data:`REACH` of its size;
 - the motion **without impacts**: no contact onset in the window, and the impact mass at rest
   (``q' = 0``: after an impact it never is again);
-- otherwise, at the cap, the drive's motion that is **not periodic**; it is classified through
-  the FMU too (:func:`piezo_fmu_harness.periodic.motion.classify`), and the class is reported
-  beside the study's.
+- otherwise, at the cap, **on no orbit**: the drive's record of that kind (chaotic, quasi-periodic
+  or undecided; the study's own for this start when it gave one, issue 31). One trajectory of the
+  FMU cannot show that a motion persists (that takes the survival of many starts): it agrees with
+  the study that the start is on no orbit within the march. It is classified through the FMU too
+  (:func:`piezo_fmu_harness.periodic.motion.classify`), and the class is reported beside the
+  study's.
 
 **Chaotic transients.** Where a start wanders chaotically before it settles, rounding grows by a
 factor of about ``e`` a period: beyond a few dozen periods the FMU's trajectory and the batch
@@ -36,6 +39,7 @@ import math
 import numpy as np
 
 from .drive import HarmonicDrive
+from .attractors import NOT_PERIODIC
 from .motion import classify
 
 #: Periods of the FMU's trajectory the rule looks at.
@@ -61,13 +65,14 @@ def _orbit_rule(sections: np.ndarray, onsets: np.ndarray, sides: np.ndarray, orb
 
 
 def fmu_label(instance, values: dict, omega: float, amplitude: float, samples: int, start, periods: int,
-              attractors: list[dict], track=None, cap: int = 0, classify_cycles: int = 40) -> dict:
+              attractors: list[dict], track=None, cap: int = 0, classify_cycles: int = 40, prefer=None) -> dict:
     """March the FMU from ``start`` (``p, p', q, q'``) and say which of ``attractors`` (records of
     this drive, each with its ``id``) its trajectory reaches (see the module's text). Returns
     ``{"attractor": id or None, "motion", "periods", "diverged_at"}`` (``motion`` the class when not
     periodic; ``diverged_at`` the first period where the FMU's sections part from ``track``, the
     study's, or None). The FMU marches :data:`EXTRA` periods past the study's ``periods``, and at
-    least the study's own cap on periods ``cap``, before its motion counts as not periodic."""
+    least the study's own cap on periods ``cap``, before its motion counts as on no orbit (the
+    record ``prefer`` when it is one of that kind)."""
     drive = HarmonicDrive(instance, values, omega, amplitude, samples)
     drive.start(np.asarray(start, float), 0.0)
     scale = drive.scale
@@ -100,5 +105,6 @@ def fmu_label(instance, values: dict, omega: float, amplitude: float, samples: i
                 return {"attractor": attractor["id"], "motion": "periodic", "periods": marched,
                         "diverged_at": diverged}
     motion = classify(drive, classify_cycles)["motion"]
-    match = next((a["id"] for a in attractors if a["kind"] == "not periodic"), None)
+    loose = [a["id"] for a in attractors if a["kind"] in NOT_PERIODIC]
+    match = prefer if prefer in loose else next(iter(loose), None)
     return {"attractor": match, "motion": motion, "periods": marched, "diverged_at": diverged}

@@ -9,7 +9,9 @@ study on the batch engine, and its record (its starts' labels and the attractors
 The FMU then checks the answer: for each attractor, the start that reached it soonest, and a seeded
 random sample of the other starts, are marched through the FMU (:func:`.confirm.fmu_label`), each
 a task too. A check **agrees** when the FMU's trajectory reaches the attractor the study gave the
-start; it **parted** when the answers differ but the FMU's sections had left the study's (passed as
+start (for an undecided point of the bifurcation diagram, when it too reaches no orbit within the
+study's budget; the undecided starts of the basins and the fractions claim nothing and are not
+checked); it **parted** when the answers differ but the FMU's sections had left the study's (passed as
 ``track``) before the study's answer was known: a chaotic transient, whose end no double-precision
 code predicts; otherwise it **disagrees**.
 
@@ -89,17 +91,23 @@ def execute(what: str, tasks: list, folder: Path, done: dict, start_over: bool, 
 
 
 def candidates(starts: dict, tries: int) -> dict[int, list[int]]:
-    """For each attractor, up to ``tries`` of its starts, those labelled soonest first."""
+    """For each attractor, up to ``tries`` of its starts, those labelled soonest first. The undecided
+    starts are no attractor's and claim nothing (issue 31): none is checked."""
     members: dict[int, list[dict]] = {}
     for record in starts.values():
-        members.setdefault(record["attractor"], []).append(record)
+        if not undecided(record):
+            members.setdefault(record["attractor"], []).append(record)
     return {k: [r["index"] for r in sorted(rows, key=lambda r: (r["periods"], r["index"]))[:tries]]
             for k, rows in members.items()}
 
 
+def undecided(record: dict) -> bool:
+    return str(record.get("motion", "")).startswith("undecided")
+
+
 def sample(starts: dict, count: int, seed: int, exclude=()) -> list[int]:
-    """``count`` starts drawn at random (seeded) from those not in ``exclude``."""
-    others = sorted(set(starts) - set(exclude))
+    """``count`` starts drawn at random (seeded) from those not in ``exclude`` and not undecided."""
+    others = sorted(set(starts) - set(exclude) - {i for i, r in starts.items() if undecided(r)})
     rng = np.random.default_rng(seed)
     return sorted(int(i) for i in rng.choice(others, size=min(count, len(others)), replace=False)) if others else []
 
@@ -109,8 +117,12 @@ def confirm_task(instance, payload: dict) -> dict:
     study marched it, the drive's attractors, the study's label)."""
     result = fmu_label(instance, payload["values"], payload["omega"], payload["amplitude"], payload["samples"],
                        payload["start"], payload["periods"], payload["attractors"], payload.get("track"),
-                       payload.get("cap", 0))
+                       payload.get("cap", 0), prefer=payload["study"])
     agree = result["attractor"] == payload["study"]
+    kind = next((a["kind"] for a in payload["attractors"] if a["id"] == payload["study"]), None)
+    if kind == "undecided" and not agree:
+        # undecided is no attractor: the FMU agrees when it too reaches no orbit within the budget
+        agree = result["periods"] > payload["periods"]
     parted = result["diverged_at"] is not None and result["diverged_at"] <= payload["periods"]
     return {"index": payload["index"], "study": payload["study"], "fmu": result["attractor"],
             "fmu_motion": result["motion"], "fmu_periods": result["periods"], "study_periods": payload["periods"],

@@ -20,6 +20,12 @@ otherwise ``quasi-periodic`` (an invariant circle in the section, the exponent z
 ``strongly modulated`` when the amplitude swings by more than :data:`STRONG` of its largest value.
 A transient that contracts more slowly than 1% a period reads as quasi-periodic over the window.
 
+**A class from one window is a hint, not a verdict** (issue 31): a chaotic transient has a positive
+exponent too, and one trajectory marched to a cap cannot show that its motion persists. The
+frequency response and the continuation's seeds report such a motion as :func:`undecided`, keeping
+the window's class beside it; the studies of many starts call a motion chaotic only once the
+survival of their starts shows that it persists (:mod:`piezo_fmu_harness.periodic.transients`).
+
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
 
@@ -70,6 +76,16 @@ def kind(exponent: float, modulation: float) -> str:
     if exponent < TRANSIENT:
         return "transient"
     return "strongly modulated" if modulation > STRONG else "quasi-periodic"
+
+
+def undecided(record: dict) -> dict:
+    """A :func:`classify` record of one trajectory marched to a cap, as the frequency response
+    reports it: ``motion`` "undecided (converging)" when its exponent says it still contracts, else
+    "undecided"; the window's class kept as ``window_class``."""
+    exponent = record.get("lyapunov_exponent")
+    converging = exponent is not None and exponent < TRANSIENT
+    return {**record, "window_class": record["motion"],
+            "motion": "undecided (converging)" if converging else "undecided"}
 
 
 def _lyapunov(drive: HarmonicDrive, sections: list) -> tuple[float, int]:

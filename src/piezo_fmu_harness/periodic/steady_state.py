@@ -32,12 +32,17 @@ every marched period, the distance to it shrinking as its multipliers say); othe
 remembered as rejected, and marching goes on. An orbit found by marching alone is the
 trajectory's own and needs no such check.
 
-**Not periodic.** When the cap on simulated cycles is reached with no stable orbit, the motion is
-reported as not periodic, with measures over a window of ``window_cycles`` forcing periods marched
-on from where the search stood: the amplitude envelope (the smallest and largest half peak-to-peak
-of one period), the mean power and the impacts per cycle; no single orbit's numbers. It is then
-classified (chaotic, quasi-periodic, strongly modulated, or a transient still converging) over
-``classify_cycles`` more, by its largest Lyapunov exponent and its modulation.
+**Undecided.** When the cap on simulated cycles is reached with no stable orbit, the motion is
+reported as undecided (issue 31: the cap is a budget, not a verdict; one trajectory cannot show
+that a motion persists, and at 0.85 ``w_n`` a sweep down reaches its orbit only at about period
+340-450), with measures over a window of ``window_cycles`` forcing periods marched on from where the
+search stood: the amplitude envelope (the smallest and largest half peak-to-peak of one period), the
+mean power and the impacts per cycle; no single orbit's numbers. Its largest Lyapunov exponent and
+modulation are measured over ``classify_cycles`` more; ``motion`` is "undecided (converging)" when
+the exponent says the motion still contracts (:data:`~.motion.TRANSIENT`), else "undecided", and
+``window_class`` keeps what the window alone would suggest (chaotic, quasi-periodic, strongly
+modulated, transient), never a verdict: whether a motion is chaotic is for the studies of many
+starts, where its persistence can be shown (``piezo-fmu fractions``, ``basins``, ``bifurcation``).
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """
@@ -51,7 +56,7 @@ import numpy as np
 
 from .attraction import Attractions
 from .drive import HarmonicDrive, measure
-from .motion import classify
+from .motion import classify, undecided
 from .settings import Settings
 from ..fmu import FmuRunError
 from .stability import Floquet, Orbit, floquet
@@ -356,8 +361,8 @@ class SteadyState(Shooting):
         bookkeeping = self._bookkeeping(drive.state(), drive.phase)
         measures = measure(drive, self.settings.window_cycles)
         bookkeeping.update(state=[float(v) for v in drive.state()], phase=float(drive.phase))  # after the window
-        motion = classify(drive, self.settings.classify_cycles)
-        return {"settled": False, "method": "none", "order": None, "return_error": None, "verdict": "not periodic",
+        motion = undecided(classify(drive, self.settings.classify_cycles))
+        return {"settled": False, "method": "none", "order": None, "return_error": None, "verdict": "undecided",
                 "stable": False, **measures, **motion, **bookkeeping}
 
     def _bookkeeping(self, x, phase: float) -> dict:

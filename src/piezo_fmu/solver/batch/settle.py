@@ -17,9 +17,16 @@ goes:
   never reaches a barrier again (:func:`.orbits.free_for_ever`): it ends on the family of orbits
   without impacts, whatever the slowly decaying transient (about 100 periods an e-fold at
   ``zeta = 0.0016``) still does.
-- **a motion that is not periodic**: no label within ``max_cycles``. Its largest Lyapunov exponent
-  (a companion trajectory ``1e-8`` away, renormalised every period) and the modulation of its
-  amplitude are measured over ``classify_cycles`` more periods, for the caller to classify.
+- **undecided**: no label within ``max_cycles``. The cap is a budget, not a verdict (issue 31):
+  a start that has not been seen reaching an orbit may be on a long chaotic transient, on an orbit
+  longer than ``max_order``, or on an attractor that is not periodic, and one trajectory cannot
+  say which. Its largest Lyapunov exponent with a 95% interval (a companion trajectory ``1e-8``
+  away, renormalised every period), the modulation of its amplitude and the line share of its
+  section's spectrum are measured over ``classify_cycles`` more periods
+  (:func:`.trajectories.statistics`). Whether the undecided starts of a drive **persist** (a
+  chaotic or quasi-periodic attractor) is a question about all its starts, not one: their
+  survival curve, fitted by the caller (``piezo_fmu_harness.periodic.transients``) from the
+  periods at which the others were resolved.
 
 Everything runs on arrays of trajectories; the resolved ones leave the ensemble after each block.
 """
@@ -44,6 +51,8 @@ LINEAR_REACH = 0.05
 RATE_SLACK = 0.02
 #: Returns of a seed for Newton: within this fraction of the size, and shrinking.
 SEED_REACH = 0.1
+#: The labels of the starts that are on no orbit (see :class:`Settled`).
+UNDECIDED, SET_ASIDE = -1, -2
 
 
 @dataclass(frozen=True)
@@ -55,13 +64,15 @@ class SettleSettings:
     tolerance : float
         Steady-state tolerance, relative to each drive's ``Y``.
     max_cycles : int
-        Periods a start is marched at most before it counts as not periodic.
+        The budget: periods a start is marched at most; one not resolved by then is undecided.
     block : int
         Periods between two looks at the trajectories.
     max_order : int
-        Longest orbit looked for, in forcing periods.
+        Longest orbit looked for, in forcing periods (16: past the Neimark-Sacker point, at
+        1.325 ``w_n``, the motion locks on the torus to a stable orbit of order 13).
     classify_cycles : int
-        Periods over which a motion that is not periodic is measured.
+        Periods over which an undecided motion is measured (its exponent's interval needs a long
+        window: the batch means of ten batches).
     seeds : int
         Newton seeds tried per drive and block, at most.
     """
@@ -69,8 +80,8 @@ class SettleSettings:
     tolerance: float = 1e-6
     max_cycles: int = 1000
     block: int = 20
-    max_order: int = 4
-    classify_cycles: int = 40
+    max_order: int = 16
+    classify_cycles: int = 200
     seeds: int = 4
 
 
@@ -86,16 +97,20 @@ class Quiet:
 class Settled:
     """Where each start went (host arrays over the starts).
 
-    ``labels``: index into ``attractors`` (an :class:`~.orbits.Orbit` or a :class:`Quiet`), -1 for
-    a motion that is not periodic, -2 for a trajectory the engine set aside; ``periods``: periods
-    marched when the label was given (``max_cycles`` for the others); for the motions that are not
-    periodic: ``exponent`` (1/period), ``modulation``, ``impacts_per_cycle``, ``amplitude``,
-    ``amplitude_min``, ``amplitude_max`` (m), NaN elsewhere, and ``samples``, ``p`` (m) at each
-    section of the window they were measured over; ``unstable``: orbits Newton found that are not
-    stable (never a label); ``cycles``: start-periods marched in all; ``final`` and ``final_sides``:
-    where each trajectory goes, at the section: the point of its orbit it was nearest when it got
-    its label, the motion without impacts with its impact mass where it rests, or, for a motion that
-    is not periodic, its state after the measuring window: where a sweep's next frequency starts.
+    ``labels``: index into ``attractors`` (an :class:`~.orbits.Orbit` or a :class:`Quiet`),
+    :data:`UNDECIDED` (-1) for a start the budget did not resolve, :data:`SET_ASIDE` (-2) for a
+    trajectory the engine set aside (whether undecided starts persist, chaotic or quasi-periodic, is
+    the caller's to judge from all the starts of a drive; the harness's records then say so by their
+    ``kind``); ``periods``: periods marched when the
+    label was given (``max_cycles`` for the others: the budget); for the undecided starts:
+    ``exponent`` with ``exponent_low``/``exponent_high`` (1/period, 95%), ``modulation``,
+    ``impacts_per_cycle``, ``amplitude``, ``amplitude_min``, ``amplitude_max`` (m) and
+    ``line_share``, NaN elsewhere, and ``samples``, ``p`` (m) at each section of the window they
+    were measured over; ``unstable``: orbits Newton found that are not stable (never a label);
+    ``cycles``: start-periods marched in all; ``final`` and ``final_sides``: where each trajectory
+    goes, at the section: the point of its orbit it was nearest when it got its label, the motion
+    without impacts with its impact mass where it rests, or, for an undecided start, its state
+    after the measuring window: where a sweep's next frequency starts.
     """
 
     labels: np.ndarray
@@ -109,12 +124,12 @@ class Settled:
     samples: np.ndarray = None
 
     def records(self) -> tuple[list[dict], list[dict]]:
-        """JSON-safe: one record per start (``label``, ``periods`` and, for a motion that is not
-        periodic, its measures) and one per attractor (:func:`describe`)."""
+        """JSON-safe: one record per start (``label``, ``periods`` and, for an undecided start, its
+        measures) and one per attractor (:func:`describe`)."""
         starts = []
         for j, label in enumerate(self.labels.tolist()):
             record = {"label": int(label), "periods": int(self.periods[j])}
-            if label == -1:
+            if label == UNDECIDED:
                 record.update({name: _finite(values[j]) for name, values in self.measures.items()})
             starts.append(record)
         return starts, [describe(a) for a in self.attractors]
@@ -307,7 +322,8 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
         found = finder.verify(x[converged], sides[-1][seeds][converged], groups[seeds][converged], order)
         fresh: list = []
         for orbit in found:
-            if orbit is not None and not _known(state.attractors + state.unstable + fresh, orbit, scales,
+            # an orbit without impacts is the neutral family's: only the proof labels it (free_for_ever)
+            if orbit is not None and sum(orbit.impacts) and not _known(state.attractors + state.unstable + fresh, orbit, scales,
                                                 finder.tolerance):
                 fresh.append(orbit)
         if not fresh:

@@ -19,9 +19,10 @@ def register(commands) -> None:
         description="At w = R sqrt(K/M), start the damper from a grid of p0 against p0' (the impact mass at rest in "
                     "the middle of the gap) and march every start, on the batch engine, until its own trajectory "
                     "shows where it goes (a stable orbit it converges to with that orbit's impacts, the motion "
-                    "without impacts once it can never impact again, or, after --max-cycles, a motion that is not "
-                    "periodic, classified); report each attractor's share with its 95%% interval and the "
-                    "uncertainty of the basin boundary. The FMU checks one start of every attractor and --confirm "
+                    "without impacts once it can never impact again, or, after the budget --max-cycles, undecided: "
+                    "chaotic only where the map's survival curve shows that it persists); report each attractor's "
+                    "share with its 95%% interval, the periods each start took, the mean transient lifetime and "
+                    "the uncertainty of the basin boundary. The FMU checks one start of every attractor and --confirm "
                     "more. Writes basins.nc/.csv, summary.json and basins.png; chunks of starts are appended to "
                     "points.jsonl (--resume).")
     basins.add_argument("--ratio", type=float, required=True, metavar="R", help="the frequency, as w / sqrt(K/M)")

@@ -1,8 +1,12 @@
-"""``basins.png``: the attractor each start ends on, over the grid of starts."""
+"""``basins.png``: the attractor each start ends on, over the grid of starts, and beside it the
+transient's length: the periods each start took to reach its motion (issue 31; the budget where it
+was left undecided), on a log scale: where the machine settles fast and where it rattles first."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import numpy as np
 
 from ...drawing import new_figure, save_png
 
@@ -10,7 +14,9 @@ from ...drawing import new_figure, save_png
 def draw(ds, path: Path) -> Path:
     from matplotlib.colors import ListedColormap
 
-    fig, ax = new_figure((7.0, 5.4))
+    from matplotlib.colors import LogNorm
+
+    fig, (ax, right) = new_figure((11.0, 5.6), 1, 2)
     count = ds.sizes["attractor"]
     colors = [f"C{k % 10}" for k in range(count)]
     ax.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, ds["attractor"].values, cmap=ListedColormap(colors),
@@ -23,4 +29,10 @@ def draw(ds, path: Path) -> Path:
     ax.set_ylabel("initial displacement p0 (mm)")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1)
     ax.set_title(f"Basins of attraction at w/w_n = {ds.attrs['ratio']:g} (impact mass at rest in the middle)", fontsize=9)
+    periods = np.maximum(ds["periods"].values.astype(float), 1.0)  # a start labelled at once: drawn as 1
+    mesh = right.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, periods, shading="nearest", cmap="magma_r",
+                            norm=LogNorm(vmin=1.0, vmax=max(2.0, float(periods.max()))))
+    fig.colorbar(mesh, ax=right, label="periods to reach the motion (1: at once; the budget: undecided)")
+    right.set_xlabel("initial velocity of the main mass p0' (m/s)")
+    right.set_title(f"How long the transient lasts (budget {ds.attrs.get('budget_periods', '?')} periods)", fontsize=9)
     return save_png(fig, path)

@@ -6,7 +6,10 @@ A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the 
 engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (the rule of
 ``piezo_fmu.solver.batch.settle``): a stable orbit it is seen converging to, with its impact
 sequence, the motion without impacts once it provably never reaches a barrier again, or, after
-``--max-cycles`` periods, a motion that is not periodic, classified. The grid is split into chunks
+the budget of ``--max-cycles`` periods, **undecided** (issue 31: a cap is a budget, not a
+verdict), unless the map's survival curve shows that what is left persists and the start's own
+exponent says chaotic or quasi-periodic (:func:`piezo_fmu_harness.periodic.attractors.merge`). The
+periods each start took are the transient's length, mapped beside the basins. The grid is split into chunks
 (:mod:`piezo_fmu_harness.periodic.many`), each a task of the sweep engine, appended to
 ``points.jsonl`` as it finishes (``--resume`` runs the others).
 
@@ -15,8 +18,10 @@ random sample of ``--confirm`` starts, are marched through the FMU, which must r
 the map gives them (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
 
 Files: ``basins.nc`` (the attractor of each start on ``p0 x dp0``, the periods it took, the
-attractors with their shares and 95% intervals), ``basins.csv``, ``summary.json`` (the shares, the
-boundary's uncertainty, the checks), ``basins.png``.
+attractors with their shares and 95% intervals), ``basins.csv``, ``summary.json`` (the budget, the
+shares, what stayed undecided, the survival fit: the mean transient lifetime with its interval and
+the plateau, the boundary's uncertainty, the checks), ``basins.png`` (the map and the transient's
+length).
 
 This study reads the simulation core's batch engine (``piezo_fmu.solver.batch``) besides the FMU,
 which checks it: the one exception, with the fractions and the bifurcation diagram, to the
@@ -34,14 +39,15 @@ import numpy as np
 
 from ...periodic.attractors import boundary, merge, shares
 from ...periodic.many import chunks
+from ...periodic.transients import counts, escape
 from ...store import open_folder
 
 HEADER_FILE = "basins.json"
 #: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude,
 #: 101 x 101 starts.
 DEFAULT_SPAN, DEFAULT_COUNT = 2.0, 101
-#: Steady-state settings of the map (the batch engine's ``SettleSettings`` fields).
-DEFAULT_MAX_CYCLES = 1000
+#: The budget of periods a start (the batch engine's ``SettleSettings.max_cycles``).
+DEFAULT_MAX_CYCLES = 6000
 #: FMU checks beyond one per attractor.
 DEFAULT_CONFIRM = 10
 
@@ -168,6 +174,7 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
         coords={"p0": ("p0", p0, {"units": "m", "long_name": "initial displacement of the main mass"}),
                 "dp0": ("dp0", dp0, {"units": "m/s", "long_name": "initial velocity of the main mass"})},
         attrs={"title": "piezo-impact damper: basins of attraction", "ratio": spec.ratio, "omega_rad_per_s": spec.omega,
+               "budget_periods": spec.max_cycles,
                "base_amplitude_m": spec.amplitude, "start": "q0 = p0, q0' = 0, base phase 0",
                "parameters": json.dumps(spec.values), "engine": "batch engine, checked through the FMU"})
     save_dataset(ds, folder / "basins.nc")
@@ -175,7 +182,13 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
     frame["attractor_name"] = np.array(names)[frame["attractor"].values]
     frame.to_csv(folder / "basins.csv", index=False)
     verdicts = [c["verdict"] for c in checks]
+    records = list(starts.values())
+    fit = escape([min(r["periods"], spec.max_cycles) for r in records if r["label"] != -2],
+                 [r["label"] >= 0 for r in records if r["label"] != -2], spec.max_cycles)
+    undecided = sum(1 for r in records if str(r.get("motion", "")).startswith("undecided"))
     report = {"ratio": spec.ratio, "starts": count, "grid": list(shape), "wall_s": wall,
+              "budget_periods": spec.max_cycles, "undecided": {"starts": undecided, "share": undecided / count},
+              "transients": counts(fit),
               "attractors": [_summary_row(row, name, relabel) for row, name in zip(rows, names)],
               "boundary": boundary(ds["attractor"].values),
               "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
@@ -189,7 +202,7 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
 
 def _summary_row(row: dict, name: str, relabel: dict) -> dict:
     keep = ("kind", "motion", "order", "impacts", "impacts_per_cycle", "amplitude", "max_multiplier", "starts",
-            "share", "share_low", "share_high", "sections", "sides")
+            "share", "share_low", "share_high", "sections", "sides", "exponent", "exponent_low", "exponent_high")
     return {"id": relabel[row["id"]], "name": name, **{k: row[k] for k in keep if k in row}}
 
 
@@ -211,4 +224,6 @@ def _name(attractor: dict) -> str:
         return f"no impacts, {1e3 * attractor['amplitude']:.2f} mm"
     if attractor["kind"] == "set aside":
         return "set aside by the batch engine"
-    return f"{attractor['motion']} (not periodic)"
+    if attractor["kind"] == "undecided":
+        return f"{attractor['motion']} within the budget"
+    return f"{attractor['motion']} (persists)"

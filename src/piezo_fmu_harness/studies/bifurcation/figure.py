@@ -20,11 +20,14 @@ def draw(ds, path: Path) -> Path:
         x = np.repeat(ratio[:, None], samples.shape[1], axis=1)
         top.plot(x.ravel(), samples.ravel(), ls="none", marker=".", ms=2.6, mew=0, **STYLES[str(direction)])
         bottom.plot(ratio, ds["impacts_per_cycle"].values[j], ls="-", lw=0.9, marker=".", ms=2, **STYLES[str(direction)])
-    chaotic = (ds["motion"].values == "chaotic").any(axis=0)
-    modulated = np.isin(ds["motion"].values, ("quasi-periodic", "strongly modulated")).any(axis=0)
+    motion = ds["motion"].values.astype(str)
+    chaotic = (motion == "chaotic").any(axis=0)
+    modulated = (motion == "quasi-periodic").any(axis=0)
+    undecided = np.char.startswith(motion, "undecided").any(axis=0)
     half = 0.5 * (ratio[-1] - ratio[0]) / max(1, len(ratio) - 1)
-    for mask, color, label in ((chaotic, "C1", "chaotic (one sweep or both)"),
-                               (modulated, "C2", "quasi-periodic or strongly modulated")):
+    for mask, color, label in ((chaotic, "C1", "chaotic, shown to persist (one sweep or both)"),
+                               (modulated, "C2", "quasi-periodic, shown to persist"),
+                               (undecided, "0.6", "undecided within the budget")):
         for k in np.flatnonzero(mask):
             top.axvspan(ratio[k] - half, ratio[k] + half, color=color, alpha=0.12, lw=0)
         if mask.any():

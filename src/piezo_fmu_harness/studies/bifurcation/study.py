@@ -6,17 +6,28 @@ Each frequency starts from where the previous one's motion goes, as the frequenc
 do, and is marched on the batch engine (``piezo_fmu.solver.batch``) until its own trajectory shows
 what it reaches (the rule of ``piezo_fmu.solver.batch.settle``): a stable orbit of order ``n``
 gives its ``n`` section samples, the motion without impacts its one; a motion that reaches no
-orbit within ``--max-cycles`` gives the samples of its measuring window (40 periods) and its
-class: quasi-periodic, strongly modulated, chaotic, or a transient still converging
-(:func:`piezo_fmu_harness.periodic.motion.kind`, from its largest Lyapunov exponent and
-modulation). The two sweeps are two tasks of the sweep engine.
+orbit within the budget ``--max-cycles`` gives the samples of its measuring window (its last
+:data:`SAMPLES` periods) and its class. The two sweeps are two tasks of the sweep engine.
+
+**Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
+the budget runs out may be on a long chaotic transient. So each point is marched together with a
+cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
+(random, seeded): a transient lets them escape at its rate, an attractor keeps them. The point's
+motion is its own trajectory's: **periodic** once it reaches an orbit (``periods`` says how long it
+took: the transient's length); else its cloud's survival curve is fitted
+(:mod:`piezo_fmu_harness.periodic.transients`) and the point is **chaotic** only when the cloud
+persists and its own exponent's 95% interval lies above 0, **quasi-periodic** when it persists with
+an exponent near 0 and a line spectrum, and **undecided** otherwise (``undecided (converging)``
+when its exponent lies below 0), with the cloud's mean transient lifetime where it has one.
 
 **The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
 of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
 diagram gives (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
 
-Files: ``bifurcation.nc`` (dims direction x omega x sample), ``bifurcation.csv`` (a row a sample),
-``summary.json`` (the classes and where, the checks), ``bifurcation.png``.
+Files: ``bifurcation.nc`` (dims direction x omega x sample; the periods each point took and its
+cloud's lifetime), ``bifurcation.csv`` (a row a sample), ``points.json`` (the damper's values and each sweep's points: the
+start, the motion, the exponent's interval, the cloud's survival fit), ``summary.json`` (the budget,
+the classes and where, the checks), ``bifurcation.png``.
 
 This study reads the simulation core's batch engine besides the FMU, which checks it: the one
 exception, with the basins and the fractions, to the harness's rule that it reads nothing but the FMU.
@@ -33,17 +44,32 @@ import numpy as np
 
 from ...datasets import bands
 from ...periodic.band import FrequencySpec
-from ...periodic.motion import kind
 
 DIRECTIONS = ("up", "down")
-#: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), at most 200 cycles each.
-DEFAULTS = {"ratios": (0.5, 2.0), "count": 200, "max_cycles": 200, "fewest": 2}
+#: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), a budget of 1000 periods each.
+DEFAULTS = {"ratios": (0.5, 2.0), "count": 200, "max_cycles": 1000, "fewest": 2}
 #: The classes of motion, in the order the summary lists them.
-CLASSES = ("periodic", "quasi-periodic", "strongly modulated", "chaotic", "transient", "unclassified", "error")
+CLASSES = ("periodic", "quasi-periodic", "chaotic", "undecided", "undecided (converging)", "error")
+#: Companions of each point's trajectory, and how far their velocities are moved (of their size).
+CLOUD, NUDGE = 16, 1e-6
+#: Section samples of a point on no orbit kept for the diagram (the last of its measuring window).
+SAMPLES = 40
 #: Periods between two looks at a sweep's trajectory.
 BLOCK = 10
 #: Points the FMU checks besides one of each kind of motion.
 DEFAULT_CONFIRM = 6
+
+
+def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
+    """The start ``state`` and :data:`CLOUD` companions, their velocities moved by :data:`NUDGE` of
+    the velocities' size (at least ``Y w``; the impact mass stays where it is relative to the
+    barriers)."""
+    state = np.asarray(state, float)
+    size = max(float(np.abs(state[[1, 3]]).max()), amplitude * omega)
+    kicks = np.random.default_rng(seed).standard_normal((CLOUD, 2)) * NUDGE * size
+    others = np.repeat(state[None], CLOUD, axis=0)
+    others[:, [1, 3]] += kicks
+    return np.concatenate([state[None], others])
 
 
 def sweep(instance, spec: dict, direction: str) -> dict:
@@ -51,21 +77,25 @@ def sweep(instance, spec: dict, direction: str) -> dict:
     on the batch engine, with its section samples of ``p`` (m)."""
     from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, describe, settle
 
+    from ...periodic.attractors import survival_fit, verdict
+    from ...periodic.transients import counts
+
     ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
     params = damper(spec["values"])
     settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
                               block=BLOCK)
     state, side = [0.0, 0.0, 0.0, 0.0], 0.0
     points = []
-    for ratio in ratios:
+    for number, ratio in enumerate(ratios):
         begin = time.process_time()
         omega = ratio * spec["natural"]
         amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
         drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
-        settled = settle(params, drive, [state], settings=settings, device=spec["device"], sides=[side])
+        starts = cloud(state, omega, amplitude, number)
+        settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts))
         label = int(settled.labels[0])
         point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
-                 "periods": int(settled.periods[0]), "status": "ok"}
+                 "periods": int(settled.periods[0]), "status": "ok", "lifetime": None, "persists": None}
         if label >= 0:
             attractor = describe(settled.attractors[label])
             point.update(motion="periodic", attractor=attractor, samples=[row[0] for row in attractor["sections"]],
@@ -73,9 +103,15 @@ def sweep(instance, spec: dict, direction: str) -> dict:
                          amplitude=attractor["amplitude"], lyapunov_exponent=None)
         elif label == -1:
             m = {name: float(values[0]) for name, values in settled.measures.items()}
-            point.update(motion=kind(m["exponent"], m["modulation"]), attractor={"kind": "not periodic"},
-                         samples=settled.samples[0].tolist(), impacts_per_cycle=m["impacts_per_cycle"], order=None,
-                         amplitude=m["amplitude"], lyapunov_exponent=m["exponent"])
+            records, _ = settled.records()
+            fit = survival_fit(records)
+            motion = verdict(records[0], fit)
+            kind_ = motion if motion in ("chaotic", "quasi-periodic") else "undecided"
+            point.update(motion=motion, attractor={"kind": kind_}, samples=settled.samples[0][-SAMPLES:].tolist(),
+                         impacts_per_cycle=m["impacts_per_cycle"], order=None, amplitude=m["amplitude"],
+                         lyapunov_exponent=m["exponent"], exponent_low=m["exponent_low"],
+                         exponent_high=m["exponent_high"], transients=counts(fit) if fit else None,
+                         lifetime=fit.lifetime if fit else None, persists=bool(fit.persists) if fit else None)
         else:
             point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
                          order=None, amplitude=None, lyapunov_exponent=None)
@@ -139,6 +175,7 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
     width = max(1, max(len(p["samples"]) for s in sweeps for p in s["points"]))
     samples = np.full((2, count, width), np.nan)
     impacts, exponent = np.full((2, count), np.nan), np.full((2, count), np.nan)
+    periods, lifetime = np.full((2, count), np.nan), np.full((2, count), np.nan)
     motion = np.full((2, count), "missing", dtype=object)
     for j, result in enumerate(sweeps):
         for point in result["points"]:
@@ -147,6 +184,8 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
             impacts[j, k] = np.nan if point["impacts_per_cycle"] is None else point["impacts_per_cycle"]
             exponent[j, k] = np.nan if point["lyapunov_exponent"] is None else point["lyapunov_exponent"]
             motion[j, k] = point["motion"]
+            periods[j, k] = point["periods"]
+            lifetime[j, k] = np.nan if point.get("lifetime") is None else point["lifetime"]
     dims = ("direction", "omega")
     return xr.Dataset(
         {"p_section": (dims + ("sample",), samples, {"units": "m", "long_name": "Poincare samples of p at the section "
@@ -154,18 +193,25 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
          "impacts_per_cycle": (dims, impacts, {"units": "1", "long_name": "impacts per forcing cycle"}),
          "lyapunov_exponent": (dims, exponent, {"units": "1/period", "long_name": "largest Lyapunov exponent (motions "
                                                                                   "that are not periodic)"}),
-         "motion": (dims, motion.astype(str), {"long_name": "periodic, quasi-periodic, strongly modulated, chaotic, "
-                                                            "transient, unclassified or error"})},
+         "motion": (dims, motion.astype(str), {"long_name": "periodic, quasi-periodic, chaotic (both shown to "
+                                                            "persist), undecided, undecided (converging) or error"}),
+         "periods": (dims, periods, {"units": "periods", "long_name": "periods the point's trajectory took to reach "
+                                                                      "its orbit (the budget when it did not)"}),
+         "lifetime": (dims, lifetime, {"units": "periods", "long_name": "mean transient lifetime of the point's "
+                                                                        "cloud, where it was on no orbit"})},
         coords={"direction": list(DIRECTIONS), "omega": spec.omegas,
                 "ratio": ("omega", np.array(spec.ratios), {"units": "1", "long_name": "w / sqrt(K/M)"})},
         attrs={"title": "piezo-impact damper: bifurcation diagram under harmonic base motion",
+               "budget_periods": spec.settings.max_cycles, "cloud": CLOUD,
                "parameters": json.dumps(spec.values), "settings": json.dumps(asdict(spec.settings))})
 
 
 def summarize(ds, wall: float, checked: list[dict]) -> dict:
     ratios = ds["ratio"].values
     verdicts = [c["verdict"] for c in checked]
-    report = {"wall_s": wall, "points": int(ds["motion"].size), "classes": {},
+    undecided = np.char.startswith(ds["motion"].values.astype(str), "undecided")
+    report = {"wall_s": wall, "points": int(ds["motion"].size), "budget_periods": int(ds.attrs["budget_periods"]),
+              "undecided": int(undecided.sum()), "classes": {},
               "fmu_checks": {"checked": len(checked), "agree": verdicts.count("agrees"),
                              "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
                              "points": checked}}
@@ -187,5 +233,6 @@ def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float, ch
                 on=["direction", "omega"]).to_csv(folder / "bifurcation.csv", index=False)
     report = summarize(ds, wall, checked)
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    (folder / "points.json").write_text(json.dumps({"values": spec.values, "sweeps": sweeps}) + "\n")
     draw(ds, folder / "bifurcation.png")
     return report

@@ -41,7 +41,7 @@ def draw(ds, chains: list[dict], path: Path) -> Path:
             if chosen:
                 ax.plot([r["lam"] for r in chosen], [1e3 * r["amplitude"] for r in chosen], ls="none",
                         marker=style["marker"], ms=4.5, mfc=fill, color=style["color"], alpha=0.8,
-                        label=f"sweep {chain['direction']}, {'stable orbit' if settled else 'not periodic'}")
+                        label=f"sweep {chain['direction']}, {'stable orbit' if settled else 'undecided'}")
     for kind, style in EVENT_STYLES.items():
         where = ds["event_kind"].values == kind
         if where.any():

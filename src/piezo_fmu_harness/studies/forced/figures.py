@@ -49,7 +49,7 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
             settled = ds["settled"].sel(damper=damper, direction=direction).values == 1
             ax.plot(ratio, np.where(settled, y, np.nan), ls=style["ls"], color=style["color"], lw=1.2,
                     marker=style["marker"], ms=4, label=style["label"])
-            loose = ds["verdict"].sel(damper=damper, direction=direction).values == "not periodic"
+            loose = ds["verdict"].sel(damper=damper, direction=direction).values == "undecided"
             if loose.any():
                 ax.plot(ratio[loose], y[loose], ls="none", marker=style["marker"] or "o", ms=6,
                         mfc="none", color=style["color"])
@@ -69,7 +69,7 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
         ax.set_yscale("symlog", linthresh=1e-2)  # zero where nothing impacts, decades where it does
     if differ.any():
         ax.axvspan(np.nan, np.nan, color="C1", alpha=0.15, label="up and down differ (with damper)")
-    ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="not periodic (hollow; bar: envelope)")
+    ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="undecided within the cap (hollow; bar: envelope)")
     if ds.sizes.get("unstable", 0):
         ax.plot([], [], ls="none", marker="x", ms=4, color="0.55", mew=0.8, label="unstable orbit met (never the response)")
     ax.set_xlabel(r"frequency ratio $\omega / \sqrt{K/M}$")

@@ -62,14 +62,15 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
                  for key, values in data.items()}
     variables["settled"] = (dims, settled, {"units": "1", "long_name": "1: a stable periodic orbit was found, verified "
                                                                     "and checked; 0: none within the cap on cycles "
-                                                                    "(the motion is reported as not periodic)"})
-    variables["method"] = (dims, method.astype(str), {"long_name": "newton, marching, none (not periodic), error "
+                                                                    "(the motion is reported as undecided)"})
+    variables["method"] = (dims, method.astype(str), {"long_name": "newton, marching, none (undecided), error "
                                                                    "(the FMU rejected the point) or missing"})
-    variables["verdict"] = (dims, verdict.astype(str), {"long_name": "stable (the response is a stable orbit), not "
-                                                                     "periodic, error or missing"})
-    variables["motion"] = (dims, motion.astype(str), {"long_name": "periodic (a stable orbit), or what a motion that is "
-                                                                   "not periodic is: quasi-periodic, strongly "
-                                                                   "modulated, chaotic, transient"})
+    variables["verdict"] = (dims, verdict.astype(str), {"long_name": "stable (the response is a stable orbit), "
+                                                                     "undecided (none reached within the cap), error "
+                                                                     "or missing"})
+    variables["motion"] = (dims, motion.astype(str), {"long_name": "periodic (a stable orbit), undecided, "
+                                                                   "or undecided (converging): its exponent says it "
+                                                                   "still contracts; never chaotic (issue 31)"})
     for part, values in (("real", multipliers.real), ("imag", multipliers.imag)):
         variables[f"multiplier_{part}"] = (dims + ("multiplier",), values,
                                            {"units": "1", "long_name": f"{part} part of the orbit's Floquet multipliers, "
@@ -161,24 +162,24 @@ def directions_differ(data: dict, settled: np.ndarray) -> np.ndarray:
 def summarize(ds) -> dict:
     """What a designer asks: the resonant amplitude with and without the damper, the band where
     the damper lowers it, the best harvested power and where, the jump bands, where the motion is
-    not periodic, and the unstable orbits met. The response at a frequency is its stable orbit or,
-    where none was found, the motion that is not periodic (measured over its window); unstable
+    undecided, and the unstable orbits met. The response at a frequency is its stable orbit or,
+    where none was reached within the cap, the undecided motion (measured over its window); unstable
     orbits never count."""
     ratios = ds["ratio"].values
     verdict = ds["verdict"].values
     settled = ds["settled"].values == 1
-    response = (verdict == "stable") | (verdict == "not periodic")
+    response = (verdict == "stable") | (verdict == "undecided")
     amplitude = np.where(response, ds["amplitude"].values, np.nan)
     power = np.where(response, ds["harvested_power"].values, np.nan)
     report = {"excitation": ds.attrs["excitation"], "natural_frequency_rad_per_s": ds.attrs["natural_frequency_rad_per_s"],
-              "points": int(ds["amplitude"].size), "not_periodic": {}, "resonant_amplitude_m": {},
+              "points": int(ds["amplitude"].size), "undecided": {}, "resonant_amplitude_m": {},
               "damper_helps": {}, "best_harvested_power": {}, "jump_bands": {}, "unstable_orbits_met": {}}
     for i, damper in enumerate(DAMPER_CASES):
         report["jump_bands"][damper] = bands(ratios, ds["directions_differ"].values[i] == 1)
         for j, direction in enumerate(DIRECTIONS):
             key = f"{damper} the damper, sweep {direction}"
-            loose = verdict[i, j] == "not periodic"
-            report["not_periodic"][key] = {f"{r:.6g}": str(m) for r, m in zip(ratios[loose], ds["motion"].values[i, j][loose])}
+            loose = verdict[i, j] == "undecided"
+            report["undecided"][key] = {f"{r:.6g}": str(m) for r, m in zip(ratios[loose], ds["motion"].values[i, j][loose])}
             met = ((ds["unstable_damper"].values == damper) & (ds["unstable_direction"].values == direction))
             report["unstable_orbits_met"][key] = {
                 "count": int(met.sum()),
@@ -210,7 +211,7 @@ def summarize(ds) -> dict:
 
 
 def _motion(settled: bool) -> str:
-    return "stable orbit" if settled else "not periodic"
+    return "stable orbit" if settled else "undecided"
 
 
 def _ratio(a, b) -> Optional[float]:
@@ -240,9 +241,9 @@ def summary_lines(report: dict) -> list[str]:
         if runs:
             lines.append(f"  up and down sweeps differ {damper} the damper at w/w_n "
                          + ", ".join(f"{lo:.4g}-{hi:.4g}" for lo, hi in runs))
-    unsettled = {key: values for key, values in report["not_periodic"].items() if values}
+    unsettled = {key: values for key, values in report["undecided"].items() if values}
     for key, values in unsettled.items():
-        lines.append(f"  not periodic (no stable orbit within the cap; measured over a window) {key}: "
+        lines.append(f"  undecided (no stable orbit reached within the cap; measured over a window) {key}: "
                      f"{len(values)} points, at w/w_n " + ", ".join(f"{r} ({m})" for r, m in values.items()))
     for key, met in report["unstable_orbits_met"].items():
         if met["count"]:

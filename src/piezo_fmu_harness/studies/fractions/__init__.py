@@ -19,10 +19,12 @@ def register(commands) -> None:
         description="At each frequency of the band, march --starts random starts (the same draws at every "
                     "frequency: p0 and p0'/w_n uniform within +-SPAN, the impact mass at rest anywhere in the gap) "
                     "on the batch engine until each one's trajectory shows where it goes, and report the share of "
-                    "each attractor with its 95%% interval; attractors keep one name across the band. The FMU "
-                    "checks one start of every attractor at every frequency and --confirm more. Writes "
-                    "fractions.nc/.csv, summary.json and fractions.png; chunks of frequencies are appended to "
-                    "points.jsonl (--resume).")
+                    "each attractor with its 95%% interval; attractors keep one name across the band. A start "
+                    "not resolved within the budget --max-cycles is undecided (chaotic only where the survival "
+                    "curve shows that what is left persists); the mean transient lifetime is fitted at every "
+                    "frequency. The FMU checks one start of every attractor at every frequency and --confirm "
+                    "more. Writes fractions.nc/.csv, transients.csv, summary.json, fractions.png and "
+                    "transients.png; chunks of frequencies are appended to points.jsonl (--resume).")
     amplitude = fractions.add_mutually_exclusive_group()
     amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
                            help="base displacement amplitude Y, m (default 1e-3)")

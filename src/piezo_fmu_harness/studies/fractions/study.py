@@ -23,10 +23,21 @@ The frequencies are grouped into chunks of the sweep engine, each chunk one batc
 the start that reached each attractor soonest, and ``--confirm`` more drawn at random, are marched
 through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.periodic.confirm`).
 
+**A start ends where its trajectory ends** (issue 31). ``--max-cycles`` is a budget, not a
+verdict: a start not seen reaching an orbit within it is **undecided**, reported with its share,
+never folded into an attractor. At each frequency the survival curve of the starts (the share
+still unresolved after ``t`` periods) is fitted (:mod:`piezo_fmu_harness.periodic.transients`):
+the **mean transient lifetime** with its 95% interval, and the plateau. Undecided starts are called
+chaotic (or quasi-periodic) only where the plateau is shown and their own exponent says so
+(:func:`piezo_fmu_harness.periodic.attractors.verdict`).
+
 Files: ``fractions.nc`` (the fraction of each attractor over frequency, adding to 1 at every
-frequency, with its 95% interval; each attractor's amplitude and impacts per cycle),
-``fractions.csv``, ``summary.json`` (the shares at each frequency, the checks), ``fractions.png``
-(the shares stacked over frequency, and each attractor's amplitude).
+frequency, with its 95% interval; each attractor's amplitude and impacts per cycle; the undecided
+share, the mean transient lifetime with its interval, the plateau and the survival curve over
+frequency), ``fractions.csv``, ``transients.csv`` (a row a frequency), ``summary.json`` (the budget,
+the shares and what stayed undecided at each frequency, the checks), ``fractions.png`` (the shares
+stacked over frequency, and each attractor's amplitude), ``transients.png`` (the mean lifetime over
+frequency, and the survival curves of a few frequencies).
 
 This study reads the simulation core's batch engine besides the FMU, which checks it: the one
 exception, with the basins and the bifurcation diagram, to the harness's rule that it reads
@@ -47,8 +58,9 @@ from ...periodic.many import chunk_size, confirm
 from ...store import open_folder
 
 HEADER_FILE = "fractions.json"
-#: The band's defaults: 61 frequencies over 0.5 to 2 sqrt(K/M).
-DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 600, "fewest": 1}
+#: The band's defaults: 61 frequencies over 0.5 to 2 sqrt(K/M), a budget of 6000 periods a start
+#: (at 1.25 w_n the last of 500 starts reaches its orbit at period 5940).
+DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 6000, "fewest": 1}
 DEFAULT_STARTS = 500
 #: FMU checks per frequency besides one per attractor.
 DEFAULT_CONFIRM = 1
@@ -161,6 +173,12 @@ def checks(spec: FractionSpec, found: list[dict], starts: dict, backend) -> list
 
 
 def build_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: list[str]):
+    from .transients import transient_variables
+
+    return transient_variables(spec, starts, _shares_dataset(spec, found, starts, names))
+
+
+def _shares_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: list[str]):
     import xarray as xr
 
     order = sorted(set(names), key=lambda name: min(k for k, n in enumerate(names) if n == name))
@@ -193,6 +211,7 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
           cycles: int) -> dict:
     from ...datasets import save_dataset
     from .figure import draw
+    from .transients import by_frequency, draw_transients
 
     names = track_names(found, list(range(len(spec.ratios))), spec.omegas.tolist())
     ds = build_dataset(spec, found, starts, names)
@@ -201,14 +220,25 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
     frame = frame.reset_index()
     frame["attractor"] = ds["attractor_name"].values[frame["attractor"].values]
     frame[frame["fraction"] > 0].to_csv(folder / "fractions.csv", index=False)
+    transients = by_frequency(ds)
+    transients.to_csv(folder / "transients.csv", index=False)
     verdicts = [c["verdict"] for c in checks]
     per_frequency = [{"ratio": r, "attractors": [{"name": names[row["id"]], "share": row["share"],
                                                   "share_low": row["share_low"], "share_high": row["share_high"],
-                                                  "amplitude": row.get("amplitude"), "kind": row["kind"]}
-                                                 for row in shares(found, starts, f)]}
-                     for f, r in enumerate(spec.ratios)]
+                                                  "amplitude": row.get("amplitude"), "kind": row["kind"],
+                                                  "motion": row.get("motion"), "exponent": row.get("exponent"),
+                                                  "exponent_low": row.get("exponent_low"),
+                                                  "exponent_high": row.get("exponent_high")}
+                                                 for row in shares(found, starts, f)],
+                       "transients": record}
+                     for f, (r, record) in enumerate(zip(spec.ratios, transients.to_dict("records")))]
+    undecided = [{"ratio": row["ratio"], "share": row["undecided"], "starts": row["undecided_starts"]}
+                 for row in transients.to_dict("records") if row["undecided_starts"]]
     report = {"frequencies": len(spec.ratios), "starts_per_frequency": spec.starts, "wall_s": wall,
-              "start_periods": cycles, "attractors": [str(n) for n in ds["attractor_name"].values],
+              "start_periods": cycles, "budget_periods": spec.max_cycles,
+              "undecided": {"frequencies": len(undecided), "starts": sum(u["starts"] for u in undecided),
+                            "where": undecided},
+              "attractors": [str(n) for n in ds["attractor_name"].values],
               "by_frequency": per_frequency,
               "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
                              "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
@@ -216,4 +246,5 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
                                          "fmu": names[c["fmu"]] if c["fmu"] is not None else None} for c in checks]}}
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     draw(ds, folder / "fractions.png")
+    draw_transients(ds, folder / "transients.png")
     return report
