@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +103,16 @@ def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, a
     out = tmp_path / "out"
     assert_refused(capsys, "bifurcation", argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "bifurcation.nc").exists()
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_the_sweeps_show_a_progress_bar_unless_told_not_to(tmp_path, capsys, monkeypatch, quiet):
+    """A frequency a task: on a terminal, the bar counts the points of both sweeps as they are done
+    (issue 32); ``--no-progress`` silences it."""
+    argv = ["--ratio-min", 1.1, "--ratio-max", 1.2, "--count", 2, "--max-cycles", 40, "--confirm", 0, "--jobs", 1,
+            "--out", tmp_path] + (["--no-progress"] if quiet else [])
+    capsys.readouterr()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert run_cli("bifurcation", *argv) == 0
+    err = capsys.readouterr().err
+    assert ("bifurcation: 100%" in err and "4/4" in err) != quiet, err

@@ -28,6 +28,7 @@ def register(commands) -> None:
     model_options(diagram)
     results_folder(diagram, "bifurcation")
     engine_once(diagram)
+    diagram.add_argument("--no-progress", action="store_true", help="no progress bar")
     diagram.set_defaults(run=command)
 
 
@@ -60,7 +61,7 @@ def command(args) -> int:
         backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
                    else make_backend(args, model, unzipdir, min(jobs, 2)))
         try:
-            sweeps, wall = study.run(spec, backend, args.device)
+            sweeps, wall = study.run(spec, backend, args.device, False if args.no_progress else None)
             checked = study.checks(spec, sweeps, backend, count, seed)
         finally:
             backend.close()

@@ -7,7 +7,8 @@ do, and is marched on the batch engine (``piezo_fmu.solver.batch``) until its ow
 what it reaches (the rule of ``piezo_fmu.solver.batch.settle``): a stable orbit of order ``n``
 gives its ``n`` section samples, the motion without impacts its one; a motion that reaches no
 orbit within the budget ``--max-cycles`` gives the samples of its measuring window (its last
-:data:`SAMPLES` periods) and its class. The two sweeps are two tasks of the sweep engine.
+:data:`SAMPLES` periods) and its class. The two sweeps are two chains of tasks of the sweep
+engine, a frequency a task, side by side (a progress bar follows them).
 
 **Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
 the budget runs out may be on a long chaotic transient. So each point is marched together with a
@@ -72,9 +73,10 @@ def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
     return np.concatenate([state[None], others])
 
 
-def sweep(instance, spec: dict, direction: str) -> dict:
-    """One sweep of the diagram (a task): each frequency from where the previous one's motion goes,
-    on the batch engine, with its section samples of ``p`` (m)."""
+def frequency(instance, spec: dict, direction: str, number: int, state: list, side: float) -> dict:
+    """Frequency ``number`` of one sweep (a task): marched on the batch engine from ``state`` (on
+    ``side``), where the previous frequency's motion went; returns its point, with its section
+    samples of ``p`` (m), and where its motion goes: the next frequency's start (:func:`follow`)."""
     from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, describe, settle
 
     from ...periodic.attractors import survival_fit, verdict
@@ -84,52 +86,75 @@ def sweep(instance, spec: dict, direction: str) -> dict:
     params = damper(spec["values"])
     settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
                               block=BLOCK)
-    state, side = [0.0, 0.0, 0.0, 0.0], 0.0
-    points = []
-    for number, ratio in enumerate(ratios):
-        begin = time.process_time()
-        omega = ratio * spec["natural"]
-        amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
-        drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
-        starts = cloud(state, omega, amplitude, number)
-        settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts))
-        label = int(settled.labels[0])
-        point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
-                 "periods": int(settled.periods[0]), "status": "ok", "lifetime": None, "persists": None}
-        if label >= 0:
-            attractor = describe(settled.attractors[label])
-            point.update(motion="periodic", attractor=attractor, samples=[row[0] for row in attractor["sections"]],
-                         impacts_per_cycle=attractor["impacts_per_cycle"], order=attractor["order"],
-                         amplitude=attractor["amplitude"], lyapunov_exponent=None)
-        elif label == -1:
-            m = {name: float(values[0]) for name, values in settled.measures.items()}
-            records, _ = settled.records()
-            fit = survival_fit(records)
-            motion = verdict(records[0], fit)
-            kind_ = motion if motion in ("chaotic", "quasi-periodic") else "undecided"
-            point.update(motion=motion, attractor={"kind": kind_}, samples=settled.samples[0][-SAMPLES:].tolist(),
-                         impacts_per_cycle=m["impacts_per_cycle"], order=None, amplitude=m["amplitude"],
-                         lyapunov_exponent=m["exponent"], exponent_low=m["exponent_low"],
-                         exponent_high=m["exponent_high"], transients=counts(fit) if fit else None,
-                         lifetime=fit.lifetime if fit else None, persists=bool(fit.persists) if fit else None)
-        else:
-            point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
-                         order=None, amplitude=None, lyapunov_exponent=None)
-        point["cpu_seconds"] = time.process_time() - begin
-        points.append(point)
-        if label != -2:
-            state, side = [float(v) for v in settled.final[0]], float(settled.final_sides[0])
-    return {"direction": direction, "points": points}
+    ratio = ratios[number]
+    begin = time.process_time()
+    omega = ratio * spec["natural"]
+    amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
+    drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
+    starts = cloud(state, omega, amplitude, number)
+    settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts))
+    label = int(settled.labels[0])
+    point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
+             "periods": int(settled.periods[0]), "status": "ok", "lifetime": None, "persists": None}
+    if label >= 0:
+        attractor = describe(settled.attractors[label])
+        point.update(motion="periodic", attractor=attractor, samples=[row[0] for row in attractor["sections"]],
+                     impacts_per_cycle=attractor["impacts_per_cycle"], order=attractor["order"],
+                     amplitude=attractor["amplitude"], lyapunov_exponent=None)
+    elif label == -1:
+        m = {name: float(values[0]) for name, values in settled.measures.items()}
+        records, _ = settled.records()
+        fit = survival_fit(records)
+        motion = verdict(records[0], fit)
+        kind_ = motion if motion in ("chaotic", "quasi-periodic") else "undecided"
+        point.update(motion=motion, attractor={"kind": kind_}, samples=settled.samples[0][-SAMPLES:].tolist(),
+                     impacts_per_cycle=m["impacts_per_cycle"], order=None, amplitude=m["amplitude"],
+                     lyapunov_exponent=m["exponent"], exponent_low=m["exponent_low"],
+                     exponent_high=m["exponent_high"], transients=counts(fit) if fit else None,
+                     lifetime=fit.lifetime if fit else None, persists=bool(fit.persists) if fit else None)
+    else:
+        point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
+                     order=None, amplitude=None, lyapunov_exponent=None)
+    point["cpu_seconds"] = time.process_time() - begin
+    if label != -2:
+        state, side = [float(v) for v in settled.final[0]], float(settled.final_sides[0])
+    return {"point": point, "next": (state, side)}
 
 
-def run(spec: FrequencySpec, backend, device: str = "cpu") -> tuple[list[dict], float]:
-    """Both sweeps on ``backend``; returns them (up first) and the wall time (s)."""
+def follow(spec: dict):
+    """The chains of the two sweeps: each frequency's task, once done, calls for the next one's,
+    from where its motion went."""
+    def next_frequency(tag, result):
+        direction, number = tag
+        if number + 1 >= len(spec["ratios"]):
+            return []
+        state, side = result["next"]
+        return [((direction, number + 1), frequency, (spec, direction, number + 1, state, side))]
+    return next_frequency
+
+
+def run(spec: FrequencySpec, backend, device: str = "cpu", progress=None) -> tuple[list[dict], float]:
+    """Both sweeps on ``backend``, the two chains side by side, a frequency a task (a progress bar
+    on stderr unless ``progress`` is False); returns them (up first) and the wall time (s)."""
+    import sys
+
+    from tqdm import tqdm
+
     begin = time.perf_counter()
     plain = {"values": spec.values, "settings": asdict(spec.settings), "ratios": list(spec.ratios),
              "natural": spec.natural, "amplitude": spec.amplitude, "acceleration": spec.acceleration, "device": device}
-    results = [result for _, result in backend.run_tasks([(d, sweep, (plain, d)) for d in DIRECTIONS])]
-    results.sort(key=lambda r: DIRECTIONS.index(r["direction"]))
-    return results, time.perf_counter() - begin
+    count = len(plain["ratios"])
+    points = {d: [None] * count for d in DIRECTIONS}
+    tasks = [((d, 0), frequency, (plain, d, 0, [0.0, 0.0, 0.0, 0.0], 0.0)) for d in DIRECTIONS]
+    bar = tqdm(total=2 * count, unit="pt", desc="bifurcation", dynamic_ncols=True,
+               disable=(not progress) if progress is not None else None, file=sys.stderr)
+    try:
+        for (direction, number), result in backend.run_tasks(tasks, follow(plain)):
+            points[direction][number] = result["point"]
+            bar.update(1)
+    finally:
+        bar.close()
+    return [{"direction": d, "points": points[d]} for d in DIRECTIONS], time.perf_counter() - begin
 
 
 def checks(spec: FrequencySpec, sweeps: list[dict], backend, count: int, seed: int) -> list[dict]:
