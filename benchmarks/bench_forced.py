@@ -7,7 +7,7 @@
    periodic), on the process pool of ``--jobs`` workers, worker start-up included; then its files
    and figures, timed apart. The forcing cycles simulated are split into the shooting (marching,
    Newton, verification, measures), the stability checks (Floquet multipliers), the search on
-   from unstable orbits and the windows of the motions that are not periodic: the cost of issue
+   from unstable orbits and the windows of the undecided points (issue 31): the cost of issue
    20's checks against the shooting alone, in the same run.
 2. The free-decay sweep of the Figs. 4-9 preset (1922 points of 2 s) on the same pool: the
    points per second of each.
@@ -200,12 +200,12 @@ def main() -> None:
           f"{forced['point_cpu_s_median']:.3f} s CPU, {forced['cycles_median']:g} forcing cycles); files and figures "
           f"{forced['outputs_s']:.2f} s more")
     for name, chain in forced["chains"].items():
-        print(f"  chain {name:14s} {chain['cpu_s']:6.1f} s CPU, {chain['not_settled']} points not periodic")
+        print(f"  chain {name:14s} {chain['cpu_s']:6.1f} s CPU, {chain['not_settled']} points undecided (no orbit within the cap)")
     cycles = forced["cycles"]
     print(f"  forcing cycles simulated: {cycles['all']}; shooting (march, Newton, verification, measures) "
           f"{cycles['shooting']}; stability checks {cycles['stability']} = {cycles['stability'] / cycles['shooting']:.2f}"
           f" x the shooting; search on from unstable orbits {cycles['search']} = "
-          f"{cycles['search'] / cycles['shooting']:.2f} x; windows of the motions not periodic {cycles['window']}")
+          f"{cycles['search'] / cycles['shooting']:.2f} x; windows of the undecided points {cycles['window']}")
     print(f"  {forced['points_with_unstable_orbits']} points met unstable orbits: {forced['their_cpu_s']:.1f} s of the "
           f"{forced['worker_cpu_s']:.1f} s CPU")
     print(f"free-decay sweep    {decay['points']} points in {decay['wall_s']:.1f} s wall = {decay['points_per_s']:.1f} "
