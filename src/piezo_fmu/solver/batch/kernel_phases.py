@@ -33,8 +33,14 @@ QM = QINV + 2 * MODES * MODES
 WEIGHT = QM + 2 * MODES * MODES
 USED = WEIGHT + MODES
 CONSTANTS = USED + 1
-#: Scratch floats per trajectory: the modal amplitudes alpha and c = alpha * gain (re, im).
-WORK = 4 * MODES
+#: Scratch floats per trajectory: the modal amplitudes alpha and c = alpha * gain (re, im), then the
+#: last evaluation of each phase's event function kept for the step that follows it: the modes'
+#: ``e^{lam t}`` (re, im) at the time ``CONTACT_AT``, and free flight's coefficients at ``FREE_AT``.
+#: The step to a located switch reuses them (the same numbers, not computed twice).
+GROWTH = 4 * MODES
+CONTACT_AT = 6 * MODES
+FREE_AT, FREE_EC, FREE_ES = CONTACT_AT + 1, CONTACT_AT + 2, CONTACT_AT + 3
+WORK = CONTACT_AT + 4
 # The array engine's constants (:mod:`.events`), repeated: the kernel's source imports nothing but
 # math and itself.
 NOISE_ULPS = 64.0
@@ -108,11 +114,12 @@ def start_sign(rate, rate_noise, K, C, u, du, barrier):
     return sign(barrier * (K * u + C * du))
 
 
-def free_values(c, u, du, w, dw, t):
+def free_values(c, work, u, du, w, dw, t):
     """The two event functions of free flight at ``t`` (right onset, left onset), their rates and
     their rounding level."""
     hg = c[HG]
     ec, es = free_coefficients(c, t)
+    work[FREE_AT], work[FREE_EC], work[FREE_ES] = t, ec, es
     uu, dd = free_apply(c, ec, es, u, du)
     ww = w + dw * t
     rr, drr = ww - uu, dw - dd
@@ -128,9 +135,11 @@ def contact_value(s, c, work, t):
         lr, li = c[LAM + j], c[LAM + MODES + j]
         grow = math.exp(lr * t)
         xr, xi = grow * math.cos(li * t), grow * math.sin(li * t)
+        work[GROWTH + j], work[GROWTH + MODES + j] = xr, xi
         tr, ti = cr * xr - ci * xi, cr * xi + ci * xr
         total += c[WEIGHT + j] * tr
         rate += c[WEIGHT + j] * (tr * lr - ti * li)
+    work[CONTACT_AT] = t
     return -s * total, -s * rate
 
 
@@ -158,7 +167,7 @@ def locate(contact, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, remaining, bound,
         if contact:
             g_a, dg_a = contact_value(s, c, work, t)
         else:
-            g_a, g_b, dg_a, dg_b, tol = free_values(c, u, du, w, dw, t)
+            g_a, g_b, dg_a, dg_b, tol = free_values(c, work, u, du, w, dw, t)
         held_a = held_b = False
     return INF, 0, True
 
@@ -167,6 +176,7 @@ def free_event(c, work, u, du, w, dw, rem):
     """The next contact onset of a free trajectory within ``rem`` (s): ``(time, barrier,
     failed)``, time inf when none (``rounds._free_events``)."""
     hg = c[HG]
+    work[FREE_AT] = NAN
     r, dr = w - u, dw - du
     tol = NOISE_ULPS * EPS * (abs(u) + abs(w) + hg)
     zero = fmax(tol, ZERO * 2.0 * hg)
@@ -187,6 +197,7 @@ def contact_event(c, u, du, w, dw, s, volt, rem, work):
     """The separation of a trajectory in contact within ``rem`` (s): ``(time, failed)``; leaves its
     modal amplitudes in ``work`` (``rounds._contact_events``)."""
     hg = c[HG]
+    work[CONTACT_AT] = NAN
     col = (u, w - s * hg, du, dw, s * volt)
     size = bound = 0.0
     for j in range(int(c[USED])):
@@ -198,8 +209,9 @@ def contact_event(c, u, du, w, dw, s, volt, rem, work):
         work[j], work[MODES + j] = ar, ai
         cr, ci = ar * c[GAIN + j] - ai * c[GAIN + MODES + j], ar * c[GAIN + MODES + j] + ai * c[GAIN + j]
         work[2 * MODES + j], work[3 * MODES + j] = cr, ci
-        size += c[WEIGHT + j] * math.hypot(cr, ci)
-        bound += c[WEIGHT + j] * math.hypot(cr, ci) * c[LAM2 + j]
+        size_j = c[WEIGHT + j] * math.hypot(cr, ci)
+        size += size_j
+        bound += size_j * c[LAM2 + j]
     delta, rate = s * (w - u) - hg, s * (dw - du)
     tol = NOISE_ULPS * EPS * (abs(u) + abs(w) + hg + size)
     near = abs(delta) <= fmax(tol, ZERO * 2.0 * hg)
@@ -216,10 +228,14 @@ def contact_state(c, work, t):
     (``rounds._modal_state``)."""
     e0 = e1 = e2 = e3 = e4 = 0.0
     m2 = MODES * MODES
+    known = work[CONTACT_AT] == t
     for j in range(int(c[USED])):
         ar, ai = work[j], work[MODES + j]
-        grow = math.exp(c[LAM + j] * t)
-        gr, gi = grow * math.cos(c[LAM + MODES + j] * t), grow * math.sin(c[LAM + MODES + j] * t)
+        if known:
+            gr, gi = work[GROWTH + j], work[GROWTH + MODES + j]
+        else:
+            grow = math.exp(c[LAM + j] * t)
+            gr, gi = grow * math.cos(c[LAM + MODES + j] * t), grow * math.sin(c[LAM + MODES + j] * t)
         weight = c[WEIGHT + j]
         xr, xi = weight * (ar * gr - ai * gi), weight * (ar * gi + ai * gr)
         e0 += xr * c[QM + j] - xi * c[QM + m2 + j]

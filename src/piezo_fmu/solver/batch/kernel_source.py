@@ -21,8 +21,8 @@ node values and the ``N`` slopes.
 
 import math
 
-from .kernel_phases import (COUPLED, EPS, HG, INF, M1, M_EQ, MI, MM, NAN, NOISE_ULPS, TAU_E, W2, ZERO,
-                            BOUND_RATE, contact_event, contact_state, fmax, fmin, free_apply, free_coefficients,
+from .kernel_phases import (COUPLED, EPS, FREE_AT, FREE_EC, FREE_ES, HG, INF, M1, M_EQ, MI, MM, NAN, NOISE_ULPS,
+                            TAU_E, W2, ZERO, BOUND_RATE, contact_event, contact_state, fmax, fmin, free_apply, free_coefficients,
                             free_event)
 
 #: Switches of one trajectory at one instant before it is declared degenerate (the core's limit).
@@ -57,7 +57,10 @@ def event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work):
         switch = t_ev <= rem and not bad
         in_contact = 0.0
         if free:
-            ec, es = free_coefficients(c, dt)
+            if work[FREE_AT] == dt:  # the location's last evaluation: the switch
+                ec, es = work[FREE_EC], work[FREE_ES]
+            else:
+                ec, es = free_coefficients(c, dt)
             u1, du1 = free_apply(c, ec, es, u, du)
             w1, dw1 = w + dw * dt, dw
         else:
