@@ -188,3 +188,28 @@ def test_the_gpu_device_without_cupy_says_what_is_missing():
 
 def test_scale_is_metres():
     assert scale_of(HarmonicHold(2.0, 1e-3)).tolist() == [1.0, 0.5, 1.0, 0.5]
+
+
+def test_a_lead_start_stops_its_cloud_once_resolved_and_gets_the_answer_it_gets_alone():
+    """``settle``'s ``lead`` (the bifurcation's point and its cloud): the march stops when the
+    lead's trajectory resolves; the lead's label, periods and orbit are those of the full march."""
+    from piezo_fmu.solver.batch import SettleSettings, settle
+
+    drive = HarmonicHold(1.2 * W_N, 1e-3)
+    rng = np.random.default_rng(7)
+    starts = np.column_stack([rng.uniform(-2e-3, 2e-3, 9), rng.uniform(-0.07, 0.07, 9), np.zeros(9), np.zeros(9)])
+    starts[:, 2] = starts[:, 0]
+    settings = SettleSettings(max_cycles=400, block=10)
+    full = settle(NOMINAL, drive, starts, settings=settings)
+    led = settle(NOMINAL, drive, starts, settings=settings, lead=1)
+    assert full.labels[0] >= 0 and led.labels[0] >= 0
+    assert led.periods[0] == full.periods[0]
+    mine = led.attractors[led.labels[0]].sections
+    theirs = full.attractors[full.labels[0]].sections
+    assert mine.shape == theirs.shape and np.abs(mine - theirs).max() <= 1e-12
+    np.testing.assert_array_equal(led.final[0], full.final[0])
+    # the cloud marched no further than its lead: those still open then are left undecided there
+    assert led.cycles < full.cycles
+    open_ = led.labels[1:] == -1
+    assert (led.periods[1:][open_] == led.periods[0]).all()
+    assert np.isnan(led.measures["exponent"][1:][open_]).all()

@@ -160,10 +160,14 @@ def _finite(value) -> float | None:
 
 
 def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
-           device: str = "cpu", progress=None, sides=None) -> Settled:
+           device: str = "cpu", progress=None, sides=None, lead: int | None = None) -> Settled:
     """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
     ``drives`` (one, or one per group) to where each goes (see the module's text).
-    ``progress(done, total)`` is called after each block."""
+    ``progress(done, total)`` is called after each block. With ``lead``, only the first ``lead``
+    starts are wanted in full, the others only for when they resolve (a cloud whose survival
+    tells whether the leads' motion persists): the march stops once the leads are resolved (the
+    others then left undecided at that period, with no measures), and only undecided leads are
+    measured."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
     starts = np.asarray(starts, float)
     n = len(starts)
@@ -177,6 +181,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     quiet: dict[int, int] = {}
     sides = np.zeros(n) if sides is None else np.asarray(sides, float)
     ens = Ensemble(params, drives, starts, groups, sides, device=device, model=model)
+    finder._tables = ens._tables  # one packing of the damper and the drives for both
     final, final_sides = starts.copy(), sides.copy()
     ids = np.arange(n)
     # A start may already be free for ever.
@@ -186,7 +191,8 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     ens, ids = (ens.select(keep), ids[keep]) if not keep.all() else (ens, ids)
     history = None
     marched = 0
-    while len(ids) and marched < settings.max_cycles:
+    wanted = n if lead is None else lead
+    while len(ids) and marched < settings.max_cycles and ids[0] < wanted:
         periods = min(settings.block, settings.max_cycles - marched)
         record = ens.advance(periods)
         finder.cycles += periods * len(ids)
@@ -209,7 +215,9 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     state.periods[ids] = marched
     samples = np.full((n, settings.classify_cycles), np.nan)
     measures = empty_measures(n)
-    if len(ids):
+    leads = ids < wanted
+    if leads.any():
+        ens, ids = (ens.select(leads), ids[leads]) if not leads.all() else (ens, ids)
         final[ids], final_sides[ids], samples[ids] = measure(ens, ids, measures, scales, settings.classify_cycles, finder)
     return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles, final,
                    final_sides, samples)
@@ -298,15 +306,21 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
     sections, impacts, sides = history["sections"], history["impacts"], history["sides"]
     span = sections.shape[0]
     open_ = state.labels[ids] == -1
+    if not open_.any():
+        return
     chosen: dict[int, list] = {}
-    for order in range(1, settings.max_order + 1):
-        if span < 3 * order + 2:
-            break
-        scale = scales[groups]
-        returns = np.abs((sections[order:] - sections[:-order]) * scale[None]).max(axis=2)
-        periodic = (impacts[order:] == impacts[:-order]).all(axis=0) & (sides[order:] == sides[:-order]).all(axis=0)
-        size = np.abs(sections[-1] * scale).max(axis=1)
-        converging = open_ & periodic & (returns[-1] < 0.5 * returns[0]) & (returns[-1] <= SEED_REACH * size)
+    scale = scales[groups]
+    size = np.abs(sections[-1] * scale).max(axis=1)
+    orders = np.arange(1, min(settings.max_order, (span - 2) // 3) + 1)
+    # the return over each order at the history's start and at its end, all orders at once
+    first = np.abs((sections[orders] - sections[0]) * scale).max(axis=2)
+    last = np.abs((sections[-1] - sections[-1 - orders]) * scale).max(axis=2)
+    shrinking = open_ & (last < 0.5 * first) & (last <= SEED_REACH * size)
+    # the impacts and the side of each period in one number: the same sequence is the same numbers
+    sequence = 3 * impacts + (np.asarray(sides, np.int64) + 1)
+    for k in np.flatnonzero(shrinking.any(axis=1)):
+        order = int(orders[k])
+        converging = shrinking[k] & (sequence[order:] == sequence[:-order]).all(axis=0)
         for j in np.flatnonzero(converging):
             if any(j in seeds for seeds in chosen.values()):
                 continue

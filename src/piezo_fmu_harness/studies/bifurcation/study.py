@@ -13,7 +13,8 @@ engine, a frequency a task, side by side (a progress bar follows them).
 **Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
 the budget runs out may be on a long chaotic transient. So each point is marched together with a
 cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
-(random, seeded): a transient lets them escape at its rate, an attractor keeps them. The point's
+(random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud
+marches only while the point's own trajectory is unresolved (``settle``'s ``lead``). The point's
 motion is its own trajectory's: **periodic** once it reaches an orbit (``periods`` says how long it
 took: the transient's length); else its cloud's survival curve is fitted
 (:mod:`piezo_fmu_harness.periodic.transients`) and the point is **chaotic** only when the cloud
@@ -92,7 +93,8 @@ def frequency(instance, spec: dict, direction: str, number: int, state: list, si
     amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
     drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
     starts = cloud(state, omega, amplitude, number)
-    settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts))
+    settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts),
+                     lead=1)
     label = int(settled.labels[0])
     point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
              "periods": int(settled.periods[0]), "status": "ok", "lifetime": None, "persists": None}
