@@ -60,9 +60,13 @@ def _die_with_parent() -> None:
         pass
 
 
-def _init_worker(fmu_path: str, unzipdir: str) -> None:
+def _init_worker(fmu_path: str, unzipdir: str, threads: int = 0) -> None:
     global _WORKER
     _die_with_parent()
+    if threads and "NUMBA_NUM_THREADS" not in os.environ:
+        # the compiled kernel's threads (numba, read when it is imported): this worker's share of
+        # the cores, so that the workers' threads together do not outnumber the cores
+        os.environ["NUMBA_NUM_THREADS"] = str(threads)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     _WORKER = Instance(FmuModel(fmu_path), unzipdir, instance_name=f"worker{os.getpid()}")
 
@@ -130,7 +134,8 @@ class ProcessPool:
         self.jobs = jobs
         self.description = f"process pool, {jobs} worker{'s' if jobs != 1 else ''}"
         self._pool_arguments = dict(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                                    initializer=_init_worker, initargs=(str(model.path), unzipdir))
+                                    initializer=_init_worker,
+                                    initargs=(str(model.path), unzipdir, max(1, default_jobs() // jobs)))
         self._executor = concurrent.futures.ProcessPoolExecutor(**self._pool_arguments)
         self.restarts = 0
 

@@ -318,13 +318,14 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
     shrinking = open_ & (last < 0.5 * first) & (last <= SEED_REACH * size)
     # the impacts and the side of each period in one number: the same sequence is the same numbers
     sequence = 3 * impacts + (np.asarray(sides, np.int64) + 1)
+    taken: set = set()
     for k in np.flatnonzero(shrinking.any(axis=1)):
         order = int(orders[k])
         converging = shrinking[k] & (sequence[order:] == sequence[:-order]).all(axis=0)
-        for j in np.flatnonzero(converging):
-            if any(j in seeds for seeds in chosen.values()):
-                continue
-            chosen.setdefault(order, []).append(j)
+        for j in np.flatnonzero(converging).tolist():
+            if j not in taken:
+                taken.add(j)
+                chosen.setdefault(order, []).append(j)
     for order, seeds in chosen.items():
         seeds = _spread(seeds, groups, sections[-1], scales, state, settings.seeds)
         if not seeds:

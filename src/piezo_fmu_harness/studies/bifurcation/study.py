@@ -57,7 +57,7 @@ CLOUD, NUDGE = 16, 1e-6
 #: Section samples of a point on no orbit kept for the diagram (the last of its measuring window).
 SAMPLES = 40
 #: Periods between two looks at a sweep's trajectory.
-BLOCK = 10
+BLOCK = 20
 #: Points the FMU checks besides one of each kind of motion.
 DEFAULT_CONFIRM = 6
 
