@@ -62,8 +62,10 @@ load-sweep: $(STAMP)
 frequency-response: $(STAMP)
 	$(BIN)/piezo-fmu frequency-response --force
 
+# The suite on every core (TEST_WORKERS=0: all in this process), a test file to a worker (tests/conftest.py).
+TEST_WORKERS ?= auto
 test: system-deps $(TEST_STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS)
 
 # The documentation site (docs/, mkdocs.yml) into build/site, strict: a broken link, a missing
 # reference or any other warning fails the build. NO_MKDOCS_2_WARNING silences the Material theme's

@@ -1,6 +1,11 @@
 """Hypothesis profiles: ``ci`` (the default, 500 examples), ``long`` (10 000) and ``dev`` (50); an
 instance of the FMI 2.0 FMU for the tests of the forced response (one per module); the standalone
-FMUs, built once per content of their inputs (``piezo_fmu.build.standalone.cached``)."""
+FMUs, built once per content of their inputs (``piezo_fmu.build.standalone.cached``).
+
+``make test`` runs the suite on every core (pytest-xdist): each test file is one group, run by
+one worker (its module fixtures are made once), and the files that share the Wine prefix and the
+standalone FMUs' cache in ``~/.cache/piezo-fmu`` are one group between them, so that no two
+workers fill that cache at once. The longest groups go first."""
 
 import os
 import subprocess
@@ -18,6 +23,39 @@ settings.register_profile("ci", max_examples=500, derandomize=True, print_blob=T
 settings.register_profile("long", max_examples=10_000, print_blob=True)
 settings.register_profile("dev", max_examples=50, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+#: Test files that share the Wine prefix and the standalone FMUs' cache: one group.
+SHARED_CACHE = ("test_windows.py", "test_standalone.py", "test_standalone_windows.py")
+#: The groups that take longest (seconds on 2 cores, ``--durations``), handed out first so that no
+#: worker is left with a long one at the end.
+LONGEST = ("wine", "test_fractions.py", "test_stability.py", "test_optimize.py", "test_masri_caughey.py",
+           "test_continuation.py", "test_bifurcation.py", "test_frequency_response.py", "test_packaging.py")
+
+
+def group_of(path: Path) -> str:
+    return "wine" if path.name in SHARED_CACHE else path.name
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: k for k, name in enumerate(LONGEST)}
+    items.sort(key=lambda item: rank.get(group_of(item.path), len(LONGEST)))  # stable: files keep their order
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's scheduler with the groups of :func:`group_of`, handed out in the order of
+    the collection (the longest first). Its own ``xdist_group`` marks cannot do it here: from
+    pytest 9.2 on, pytest-xdist 3.8 cannot add a group to a test's node id, so every marked test
+    would be scheduled alone."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileGroups(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(Path(nodeid.split("::", 1)[0]))
+
+    config.option.loadscopereorder = False
+    return FileGroups(config, log)
 
 
 @pytest.fixture(scope="session")
