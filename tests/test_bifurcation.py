@@ -91,6 +91,46 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
         marcher.close()
 
 
+def persistence(*argv) -> tuple[int, dict]:
+    """``tools/persistence.py`` in a fresh process: its exit status and its report."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(ROOT / "tools" / "persistence.py"), *map(str, argv), "--no-progress"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode in (0, 1), done.stderr
+    return done.returncode, json.loads(done.stdout)
+
+
+def test_every_point_called_chaotic_persists_under_a_march_twice_as_long(diagram):
+    """Issue 31's check of a run, by ``tools/persistence.py``: each chaotic point's own trajectory,
+    marched again from its start for twice the budget, still reaches no orbit."""
+    status, report = persistence(diagram)
+    (folder,) = report["folders"]
+    points = [p for s in json.loads((diagram / "points.json").read_text())["sweeps"] for p in s["points"]]
+    assert folder["claims"] == sum(p["motion"] in ("chaotic", "quasi-periodic") for p in points) > 0
+    assert folder["marched"] == 2 * folder["budget"] == 800
+    assert folder["start_periods"] >= folder["claims"] * 800  # each marched to the end
+    assert folder["persisted"] == folder["claims"] and folder["resolved"] == [] and status == 0
+
+
+def test_the_persistence_check_finds_a_claim_that_reaches_an_orbit(diagram, tmp_path):
+    """The check can fail: a periodic point relabelled chaotic is found reaching its orbit, at the
+    period the diagram says, and the exit status says a claim did not hold."""
+    copy = tmp_path / "diagram"
+    copy.mkdir()
+    for name in ("points.json", "bifurcation.nc", "summary.json"):
+        (copy / name).write_bytes((diagram / name).read_bytes())
+    saved = json.loads((copy / "points.json").read_text())
+    point = next(p for s in saved["sweeps"] for p in s["points"] if p["motion"] == "periodic")
+    point["motion"] = "chaotic"
+    (copy / "points.json").write_text(json.dumps(saved))
+    status, report = persistence(copy)
+    (folder,) = report["folders"]
+    wrong = [r for r in folder["resolved"] if r["ratio"] == point["ratio"]]
+    assert status == 1 and len(wrong) == 1 and wrong[0]["resolved_at"] == point["periods"]
+    assert wrong[0]["reached"]["order"] == point["order"]
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--ratio-min", "0"], ["--ratio-min 0", "allowed range (0, inf)"]),
     (["--ratio-min", "1.2", "--ratio-max", "1.1"], ["--ratio-min 1.2", "reversed range"]),
