@@ -36,8 +36,9 @@ WINDOW = 10
 
 
 def _chunks(folder: Path) -> dict:
-    lines = (folder / "points.jsonl").read_text().splitlines()
-    return {chunk["index"]: chunk for chunk in map(json.loads, lines)}
+    from piezo_fmu_harness.store import PointStore
+
+    return PointStore(folder).load()
 
 
 def _header(folder: Path, name: str) -> dict:

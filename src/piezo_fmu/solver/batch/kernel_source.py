@@ -22,8 +22,8 @@ node values and the ``N`` slopes.
 import math
 
 from .kernel_phases import (COUPLED, EPS, FREE_AT, FREE_EC, FREE_ES, HG, INF, M1, M_EQ, MI, MM, NAN, NOISE_ULPS,
-                            TAU_E, W2, ZERO, BOUND_RATE, contact_event, contact_state, fmax, fmin, free_apply, free_coefficients,
-                            free_event)
+                            TAU_E, W2, ZERO, BOUND_RATE, contact_event, contact_state, fmax, fmin, free_apply,
+                            free_coefficients, free_event)
 
 #: Switches of one trajectory at one instant before it is declared degenerate (the core's limit).
 MAX_SWITCHES_AT_ONE_INSTANT = 8

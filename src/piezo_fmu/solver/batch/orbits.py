@@ -163,7 +163,15 @@ class OrbitFinder:
         self.model, self.drives, self.device = model, list(drives), device
         self.tolerance = np.broadcast_to(np.asarray(tolerance, float), (len(self.drives),))
         self.cycles = 0  # start-periods marched by this finder
-        self._tables = None  # the kernel's tables of the damper and the drives, packed once
+        self._tables = None
+
+    @property
+    def tables(self):
+        """The damper and the drives packed for the compiled kernel, once."""
+        if self._tables is None:
+            from .kernel import Tables
+            self._tables = Tables(self.model, self.drives)
+        return self._tables
 
     def march(self, states, sides, groups, periods: int, observe: bool = False) -> dict | None:
         """``periods`` periods from each start; None for none. Starts that the engine refuses
@@ -178,8 +186,7 @@ class OrbitFinder:
             record.update(top=np.full((periods, len(states)), np.nan), bottom=np.full((periods, len(states)), np.nan))
         if valid.any():
             ens = Ensemble(self.model.params, self.drives, states[valid], groups[valid], sides[valid],
-                           device=self.device, model=self.model, tables=self._tables)
-            self._tables = ens._tables
+                           device=self.device, model=self.model, tables=self.tables)
             out = ens.advance(periods, observe=observe)
             self.cycles += periods * int(valid.sum())
             for name, values in out.items():

@@ -180,8 +180,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     state = _State(n, settings)
     quiet: dict[int, int] = {}
     sides = np.zeros(n) if sides is None else np.asarray(sides, float)
-    ens = Ensemble(params, drives, starts, groups, sides, device=device, model=model)
-    finder._tables = ens._tables  # one packing of the damper and the drives for both
+    ens = Ensemble(params, drives, starts, groups, sides, device=device, model=model, tables=finder.tables)
     final, final_sides = starts.copy(), sides.copy()
     ids = np.arange(n)
     # A start may already be free for ever.
