@@ -17,7 +17,7 @@ from fmpy_march import Marcher, settled
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
-from piezo_fmu_harness.studies.bifurcation.study import CLASSES
+from piezo_fmu_harness.studies.bifurcation.study import CLASSES, CLOUD
 
 ROOT = Path(__file__).resolve().parent.parent
 FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
@@ -71,6 +71,7 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
     for p in points:
         if p["motion"] != "periodic":
             assert (p["motion"] == "chaotic") == (p["transients"]["persists"] and p["exponent_low"] > 0)
+            assert p["transients"]["starts"] == CLOUD + 1  # the point's own trajectory and its cloud
     budget = json.loads((diagram / "summary.json").read_text())["budget_periods"]
     point = chaotic[0]
     values = saved["values"]

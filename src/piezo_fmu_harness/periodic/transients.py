@@ -23,7 +23,10 @@ ratio within the chi-square(1) quantile 3.84); the mean transient lifetime is ``
 - the likelihood ratio test of a plateau against a pure exponential decay rejects it at 5%
   (statistic above 2.71: the chi-bar-square of a parameter on its boundary); or, when no start
   resolved after the onset at all, the lifetime's 95% lower bound ``E / 3.69`` (``E`` the periods
-  at risk) is at least twice the budget;
+  at risk) is at least :data:`REACH` budgets (19.5): at the slowest escape the data allow, a start
+  still on the motion at the budget leaves it within a march as long again with odds below one in
+  :data:`PURE` (``1 - exp(-1 / REACH) = 1 / PURE``). A march twice as long (the check of issue 31)
+  then finds it still there but for those odds;
 - the transient has died out: the fit, at its slowest rate (the interval's low end), leaves fewer
   than one in :data:`PURE` of the unresolved starts still on the transient at the budget;
 - the curve is flat at its end: the starts that resolved in the second half of the budget are not
@@ -51,6 +54,8 @@ CHIBAR_05 = 2.705543454095404
 NONE_SEEN = 3.6888794541139363
 #: At the budget at most one in this many unresolved starts may still be on the transient.
 PURE = 20
+#: With no escape seen, the lifetime's 95% lower bound needed, in budgets (see the module's text).
+REACH = -1.0 / math.log1p(-1.0 / PURE)
 #: The onset of the exponential decay, as a fraction of the budget, unless given.
 ONSET = 0.05
 
@@ -186,7 +191,7 @@ def escape(periods, resolved, budget: int, onset: int | None = None) -> Escape:
         # Nothing escaped after the onset: the rate is bounded above only.
         high = NONE_SEEN / exposure
         low_life = 1.0 / high
-        persists = low_life >= 2.0 * budget
+        persists = low_life >= REACH * budget
         return Escape(len(periods), budget, onset, n, 0, censored, exposure, 0.0, 0.0, high, None, low_life, None,
                       1.0, _plateau_low_without_escapes(n), 1.0, math.inf, 0, 0.0, persists)
     # The pure exponential, and the model with a plateau.

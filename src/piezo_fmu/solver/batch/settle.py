@@ -160,14 +160,16 @@ def _finite(value) -> float | None:
 
 
 def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
-           device: str = "cpu", progress=None, sides=None, lead: int | None = None) -> Settled:
+           device: str = "cpu", progress=None, sides=None, lead: int | None = None,
+           measured: bool = True) -> Settled:
     """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
     ``drives`` (one, or one per group) to where each goes (see the module's text).
     ``progress(done, total)`` is called after each block. With ``lead``, only the first ``lead``
     starts are wanted in full, the others only for when they resolve (a cloud whose survival
     tells whether the leads' motion persists): the march stops once the leads are resolved (the
     others then left undecided at that period, with no measures), and only undecided leads are
-    measured."""
+    measured. With ``measured`` False, no start is measured (a cloud wanted only for when its starts
+    resolve): the undecided ones come back with NaN measures and no samples."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
     starts = np.asarray(starts, float)
     n = len(starts)
@@ -215,7 +217,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     samples = np.full((n, settings.classify_cycles), np.nan)
     measures = empty_measures(n)
     leads = ids < wanted
-    if leads.any():
+    if measured and leads.any():
         ens, ids = (ens.select(leads), ids[leads]) if not leads.all() else (ens, ids)
         final[ids], final_sides[ids], samples[ids] = measure(ens, ids, measures, scales, settings.classify_cycles, finder)
     return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles, final,

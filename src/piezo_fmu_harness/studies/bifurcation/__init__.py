@@ -19,8 +19,8 @@ def register(commands) -> None:
         description="Sweep the damper's base frequency up and down on the batch engine (each frequency from where "
                     "the previous one's motion goes); at each, the section samples of p and the impacts per cycle "
                     "of the motion the trajectory reaches; a motion that reaches no orbit within the budget "
-                    "--max-cycles is chaotic or quasi-periodic only when a cloud of 16 companions shows that it "
-                    "persists (and its Lyapunov exponent says so), else undecided. The FMU checks one point of "
+                    f"--max-cycles is chaotic or quasi-periodic only when a cloud of {study.CLOUD} companions shows "
+                    "that it persists (and its Lyapunov exponent says so), else undecided. The FMU checks one point of "
                     "every kind of motion and --confirm more. Writes bifurcation.nc/.csv, points.json, "
                     "summary.json and bifurcation.png.")
     band_options(diagram, study.DEFAULTS, newton=False)

@@ -11,16 +11,19 @@ orbit within the budget ``--max-cycles`` gives the samples of its measuring wind
 engine, a frequency a task, side by side (a progress bar follows them).
 
 **Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
-the budget runs out may be on a long chaotic transient. So each point is marched together with a
+the budget runs out may be on a long chaotic transient. So each such point is marched again with a
 cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
-(random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud
-marches only while the point's own trajectory is unresolved (``settle``'s ``lead``). The point's
-motion is its own trajectory's: **periodic** once it reaches an orbit (``periods`` says how long it
-took: the transient's length); else its cloud's survival curve is fitted
-(:mod:`piezo_fmu_harness.periodic.transients`) and the point is **chaotic** only when the cloud
-persists and its own exponent's 95% interval lies above 0, **quasi-periodic** when it persists with
-an exponent near 0 and a line spectrum, and **undecided** otherwise (``undecided (converging)``
-when its exponent lies below 0), with the cloud's mean transient lifetime where it has one.
+(random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud is
+as large as the rule of :mod:`piezo_fmu_harness.periodic.transients` needs to show, from one budget
+with none escaping, that the motion would outlive a march as long again but for odds of 1 in 20.
+The chain goes on from the point's own trajectory, so the clouds are tasks of their own, run beside
+the chains on every worker. The point's motion is its own trajectory's: **periodic** once it
+reaches an orbit (``periods`` says how long it took: the transient's length); else its cloud's
+survival curve, the point's own trajectory among it, is fitted and the point is **chaotic** only
+when the cloud persists and its own exponent's 95% interval lies above 0, **quasi-periodic** when
+it persists with an exponent near 0 and a line spectrum, and **undecided** otherwise (``undecided
+(converging)`` when its exponent lies below 0), with the cloud's mean transient lifetime where it
+has one.
 
 **The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
 of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
@@ -38,6 +41,7 @@ exception, with the basins and the fractions, to the harness's rule that it read
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -46,14 +50,19 @@ import numpy as np
 
 from ...datasets import bands
 from ...periodic.band import FrequencySpec
+from ...periodic.transients import NONE_SEEN, ONSET, REACH
 
 DIRECTIONS = ("up", "down")
 #: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), a budget of 1000 periods each.
 DEFAULTS = {"ratios": (0.5, 2.0), "count": 200, "max_cycles": 1000, "fewest": 2}
 #: The classes of motion, in the order the summary lists them.
 CLASSES = ("periodic", "quasi-periodic", "chaotic", "undecided", "undecided (converging)", "error")
-#: Companions of each point's trajectory, and how far their velocities are moved (of their size).
-CLOUD, NUDGE = 16, 1e-6
+#: Companions of each point's trajectory: the fewest trajectories whose march of a budget, none
+#: escaping, shows that the motion persists (a mean lifetime of ``REACH`` budgets at least, at 95%:
+#: 76 of them), and 4 to spare for members set aside.
+CLOUD = math.ceil(NONE_SEEN * REACH / (1.0 - ONSET)) + 3
+#: How far the companions' velocities are moved, of their size.
+NUDGE = 1e-6
 #: Section samples of a point on no orbit kept for the diagram (the last of its measuring window).
 SAMPLES = 40
 #: Periods between two looks at a sweep's trajectory.
@@ -75,29 +84,21 @@ def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
 
 
 def frequency(instance, spec: dict, direction: str, number: int, state: list, side: float) -> dict:
-    """Frequency ``number`` of one sweep (a task): marched on the batch engine from ``state`` (on
-    ``side``), where the previous frequency's motion went; returns its point, with its section
-    samples of ``p`` (m), and where its motion goes: the next frequency's start (:func:`follow`)."""
-    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper, describe, settle
+    """Frequency ``number`` of one sweep (a task): its own trajectory marched alone on the batch
+    engine from ``state`` (on ``side``), where the previous frequency's motion went; returns its
+    point (with its section samples of ``p``, m), its trajectory's record and where its motion goes:
+    the next frequency's start (:func:`follow`). A trajectory on no orbit at the budget waits for its
+    cloud (:func:`companions`) before its motion is known."""
+    from piezo_fmu.solver.batch import describe, settle
 
-    from ...periodic.attractors import survival_fit, verdict
-    from ...periodic.transients import counts
-
-    ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
-    params = damper(spec["values"])
-    settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
-                              block=BLOCK)
-    ratio = ratios[number]
+    ratio, omega, amplitude, drive, settings = _drive(spec, direction, number)
     begin = time.process_time()
-    omega = ratio * spec["natural"]
-    amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
-    drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
-    starts = cloud(state, omega, amplitude, number)
-    settled = settle(params, drive, starts, settings=settings, device=spec["device"], sides=[side] * len(starts),
-                     lead=1)
+    settled = settle(damper_of(spec), drive, [state], settings=settings, device=spec["device"], sides=[side])
     label = int(settled.labels[0])
-    point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state), "start_side": side,
-             "periods": int(settled.periods[0]), "status": "ok", "lifetime": None, "persists": None}
+    point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state),
+             "start_side": side, "periods": int(settled.periods[0]), "status": "ok", "lifetime": None,
+             "persists": None}
+    record = None
     if label >= 0:
         attractor = describe(settled.attractors[label])
         point.update(motion="periodic", attractor=attractor, samples=[row[0] for row in attractor["sections"]],
@@ -105,39 +106,94 @@ def frequency(instance, spec: dict, direction: str, number: int, state: list, si
                      amplitude=attractor["amplitude"], lyapunov_exponent=None)
     elif label == -1:
         m = {name: float(values[0]) for name, values in settled.measures.items()}
-        records, _ = settled.records()
-        fit = survival_fit(records)
-        motion = verdict(records[0], fit)
-        kind_ = motion if motion in ("chaotic", "quasi-periodic") else "undecided"
-        point.update(motion=motion, attractor={"kind": kind_}, samples=settled.samples[0][-SAMPLES:].tolist(),
+        record = settled.records()[0][0]
+        point.update(motion=None, attractor=None, samples=settled.samples[0][-SAMPLES:].tolist(),
                      impacts_per_cycle=m["impacts_per_cycle"], order=None, amplitude=m["amplitude"],
-                     lyapunov_exponent=m["exponent"], exponent_low=m["exponent_low"],
-                     exponent_high=m["exponent_high"], transients=counts(fit) if fit else None,
-                     lifetime=fit.lifetime if fit else None, persists=bool(fit.persists) if fit else None)
+                     lyapunov_exponent=m["exponent"], exponent_low=m["exponent_low"], exponent_high=m["exponent_high"])
     else:
         point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
                      order=None, amplitude=None, lyapunov_exponent=None)
     point["cpu_seconds"] = time.process_time() - begin
     if label != -2:
         state, side = [float(v) for v in settled.final[0]], float(settled.final_sides[0])
-    return {"point": point, "next": (state, side)}
+    return {"point": point, "record": record, "next": (state, side)}
+
+
+def companions(instance, spec: dict, direction: str, number: int, state: list, side: float) -> dict:
+    """The cloud of frequency ``number``'s point (a task): its :data:`CLOUD` companions marched
+    from around the point's start to where each goes, within the budget; returns their records
+    (``label``, ``periods``) and the CPU time."""
+    from piezo_fmu.solver.batch import settle
+
+    _, omega, amplitude, drive, settings = _drive(spec, direction, number)
+    begin = time.process_time()
+    starts = cloud(state, omega, amplitude, number)[1:]
+    settled = settle(damper_of(spec), drive, starts, settings=settings, device=spec["device"],
+                     sides=[side] * len(starts), measured=False)
+    records = [{"label": int(label), "periods": int(periods)}
+               for label, periods in zip(settled.labels.tolist(), settled.periods.tolist())]
+    return {"records": records, "cpu_seconds": time.process_time() - begin}
+
+
+def damper_of(spec: dict):
+    from piezo_fmu.solver.batch import damper
+
+    return damper(spec["values"])
+
+
+def _drive(spec: dict, direction: str, number: int):
+    """Frequency ``number`` of the sweep ``direction``: its ratio to ``sqrt(K/M)``, ``omega``
+    (rad/s), ``Y`` (m), its drive and the march's settings."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings
+
+    ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
+    ratio = ratios[number]
+    omega = ratio * spec["natural"]
+    amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
+    settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
+                              block=BLOCK)
+    return ratio, omega, amplitude, HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"]), settings
+
+
+def judged(point: dict, record: dict, clouded: dict) -> dict:
+    """The point whose own trajectory reached no orbit, with its motion (the rule of the module's
+    text): its cloud's survival fit, with the point's own record among the cloud's."""
+    from ...periodic.attractors import survival_fit, verdict
+    from ...periodic.transients import counts
+
+    fit = survival_fit([record] + clouded["records"])
+    motion = verdict(record, fit)
+    return {**point, "motion": motion, "attractor": {"kind": motion if motion in ("chaotic", "quasi-periodic")
+                                                     else "undecided"},
+            "transients": counts(fit) if fit else None, "lifetime": fit.lifetime if fit else None,
+            "persists": bool(fit.persists) if fit else None,
+            "cpu_seconds": point["cpu_seconds"] + clouded["cpu_seconds"]}
 
 
 def follow(spec: dict):
     """The chains of the two sweeps: each frequency's task, once done, calls for the next one's,
-    from where its motion went."""
-    def next_frequency(tag, result):
-        direction, number = tag
-        if number + 1 >= len(spec["ratios"]):
+    from where its motion went, and for its cloud when its trajectory reached no orbit."""
+    def next_tasks(tag, result):
+        direction, number = tag[:2]
+        if len(tag) == 3:  # a cloud
             return []
-        state, side = result["next"]
-        return [((direction, number + 1), frequency, (spec, direction, number + 1, state, side))]
-    return next_frequency
+        more = []
+        if number + 1 < len(spec["ratios"]):
+            state, side = result["next"]
+            more.append(((direction, number + 1), frequency, (spec, direction, number + 1, state, side)))
+        if result["record"] is not None:
+            point = result["point"]
+            more.append(((direction, number, "cloud"), companions,
+                         (spec, direction, number, point["start"], point["start_side"])))
+        return more
+    return next_tasks
 
 
 def run(spec: FrequencySpec, backend, device: str = "cpu", progress=None) -> tuple[list[dict], float]:
-    """Both sweeps on ``backend``, the two chains side by side, a frequency a task (a progress bar
-    on stderr unless ``progress`` is False); returns them (up first) and the wall time (s)."""
+    """Both sweeps on ``backend``, the two chains side by side, a frequency a task and each point's
+    cloud a task of its own (they need not wait for each other: the chain goes on from the point's
+    own trajectory), with a progress bar on stderr unless ``progress`` is False; returns the sweeps
+    (up first) and the wall time (s)."""
     import sys
 
     from tqdm import tqdm
@@ -147,12 +203,21 @@ def run(spec: FrequencySpec, backend, device: str = "cpu", progress=None) -> tup
              "natural": spec.natural, "amplitude": spec.amplitude, "acceleration": spec.acceleration, "device": device}
     count = len(plain["ratios"])
     points = {d: [None] * count for d in DIRECTIONS}
+    waiting = {}
     tasks = [((d, 0), frequency, (plain, d, 0, [0.0, 0.0, 0.0, 0.0], 0.0)) for d in DIRECTIONS]
     bar = tqdm(total=2 * count, unit="pt", desc="bifurcation", dynamic_ncols=True,
                disable=(not progress) if progress is not None else None, file=sys.stderr)
     try:
-        for (direction, number), result in backend.run_tasks(tasks, follow(plain)):
-            points[direction][number] = result["point"]
+        for tag, result in backend.run_tasks(tasks, follow(plain)):
+            direction, number = tag[:2]
+            if len(tag) == 3:
+                point, record = waiting.pop((direction, number))
+                points[direction][number] = judged(point, record, result)
+            elif result["record"] is not None:
+                waiting[(direction, number)] = (result["point"], result["record"])
+                continue
+            else:
+                points[direction][number] = result["point"]
             bar.update(1)
     finally:
         bar.close()
