@@ -186,3 +186,22 @@ def test_a_copy_of_the_package_finds_the_compiled_kernel_in_the_cache(tmp_path):
     log = result.stdout + result.stderr
     assert "data loaded" in log
     assert "data saved" not in log, log[-3000:]
+
+
+def test_each_version_of_the_kernels_files_has_its_own_cache_folder(tmp_path):
+    """The compiled code is kept by the content of all three files: a copy elsewhere finds the same
+    folder, a change to any one of them (the drivers' file included) another."""
+    from piezo_fmu.solver.batch import kernel_cache
+
+    files = [Path(kernel.__file__).with_name(name) for name in ("kernel_phases.py", "kernel_source.py", "kernel.py")]
+    copies = []
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        copies.append([tmp_path / name / f.name for f in files])
+        for f, c in zip(files, copies[-1]):
+            c.write_bytes(f.read_bytes())
+    here = kernel_cache.version_folder(tuple(files), tmp_path)
+    assert kernel_cache.version_folder(tuple(copies[0]), tmp_path) == here
+    copies[1][2].write_text(copies[1][2].read_text() + "\n# another INLINE\n")
+    assert kernel_cache.version_folder(tuple(copies[1]), tmp_path) != here
+    assert here.parent == tmp_path

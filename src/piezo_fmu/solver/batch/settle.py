@@ -160,16 +160,12 @@ def _finite(value) -> float | None:
 
 
 def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
-           device: str = "cpu", progress=None, sides=None, lead: int | None = None,
-           measured: bool = True) -> Settled:
+           device: str = "cpu", progress=None, sides=None, measured: bool = True) -> Settled:
     """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
     ``drives`` (one, or one per group) to where each goes (see the module's text).
-    ``progress(done, total)`` is called after each block. With ``lead``, only the first ``lead``
-    starts are wanted in full, the others only for when they resolve (a cloud whose survival
-    tells whether the leads' motion persists): the march stops once the leads are resolved (the
-    others then left undecided at that period, with no measures), and only undecided leads are
-    measured. With ``measured`` False, no start is measured (a cloud wanted only for when its starts
-    resolve): the undecided ones come back with NaN measures and no samples."""
+    ``progress(done, total)`` is called after each block. With ``measured`` False, the starts
+    undecided at the budget are not measured (a cloud wanted only for when its starts resolve):
+    they come back with NaN measures, no samples, and their start as ``final``."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
     starts = np.asarray(starts, float)
     n = len(starts)
@@ -192,8 +188,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     ens, ids = (ens.select(keep), ids[keep]) if not keep.all() else (ens, ids)
     history = None
     marched = 0
-    wanted = n if lead is None else lead
-    while len(ids) and marched < settings.max_cycles and ids[0] < wanted:
+    while len(ids) and marched < settings.max_cycles:
         periods = min(settings.block, settings.max_cycles - marched)
         record = ens.advance(periods)
         finder.cycles += periods * len(ids)
@@ -216,9 +211,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     state.periods[ids] = marched
     samples = np.full((n, settings.classify_cycles), np.nan)
     measures = empty_measures(n)
-    leads = ids < wanted
-    if measured and leads.any():
-        ens, ids = (ens.select(leads), ids[leads]) if not leads.all() else (ens, ids)
+    if measured and len(ids):
         final[ids], final_sides[ids], samples[ids] = measure(ens, ids, measures, scales, settings.classify_cycles, finder)
     return Settled(state.labels, state.periods, state.attractors, state.unstable, measures, finder.cycles, final,
                    final_sides, samples)
