@@ -92,6 +92,17 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
         marcher.close()
 
 
+def test_one_process_draws_the_diagram_the_process_pool_draws(diagram, tmp_path):
+    """The chains and the clouds are tasks of their own, finished in whatever order the workers
+    take them: one process, running them one after the other, gives every point the same."""
+    assert run_cli("bifurcation", "--ratio-min", 0.98, "--ratio-max", 1.02, "--count", 3, "--max-cycles", 400,
+                   "--jobs", 1, "--confirm", 0, "--out", tmp_path, "--fmu", FMU) == 0
+    pool, alone = (json.loads((folder / "points.json").read_text()) for folder in (diagram, tmp_path))
+    for a, b in zip(pool["sweeps"], alone["sweeps"]):
+        for p, q in zip(a["points"], b["points"]):
+            assert {k: v for k, v in p.items() if k != "cpu_seconds"} == {k: v for k, v in q.items() if k != "cpu_seconds"}
+
+
 def persistence(*argv) -> tuple[int, dict]:
     """``tools/persistence.py`` in a fresh process: its exit status and its report."""
     import subprocess
