@@ -43,6 +43,10 @@ def summary(basins) -> dict:
     return json.loads((basins / "summary.json").read_text())
 
 
+def test_the_summary_gives_the_marching_time_apart_from_the_fmus_checks(summary):
+    assert 0 < summary["marching_wall_s"] < summary["wall_s"]
+
+
 @pytest.fixture(scope="module")
 def marcher():
     m = Marcher(FMU)

@@ -39,6 +39,10 @@ def summary(fractions) -> dict:
     return json.loads((fractions / "summary.json").read_text())
 
 
+def test_the_summary_gives_the_marching_time_apart_from_the_fmus_checks(summary):
+    assert 0 < summary["marching_wall_s"] < summary["wall_s"]
+
+
 def test_the_fractions_add_to_one_at_every_frequency_within_their_intervals(fractions):
     ds = open_dataset(fractions / "fractions.nc")
     assert ds.sizes["omega"] == 3

@@ -101,6 +101,7 @@ def command(args) -> int:
                            {**spec.to_dict(), "fmu_guid": model.guid}, backend, spec.shape[0] * spec.shape[1],
                            False if args.no_progress else None, args.device):
                 return 130
+            marched = time.perf_counter() - begin  # before the FMU's checks
             found, starts = study.outcome(spec, done)
             checks = confirm(backend, [(study.payloads(spec, found, starts), starts, spec.confirm, spec.seed)])
         finally:
@@ -108,7 +109,7 @@ def command(args) -> int:
     finally:
         instance.free()
         discard(unzipdir)
-    report = study.write(spec, found, starts, checks, folder, time.perf_counter() - begin)
+    report = study.write(spec, found, starts, checks, folder, time.perf_counter() - begin, marched)
     print(f"{PROG} basins at w/w_n = {ratio:g}: {report['starts']} starts")
     for attractor in report["attractors"]:
         print(f"  {100 * attractor['share']:5.1f}% ({100 * attractor['share_low']:.1f}-"

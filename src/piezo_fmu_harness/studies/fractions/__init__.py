@@ -82,6 +82,7 @@ def command(args) -> int:
                            {**spec.to_dict(), "fmu_guid": model.guid}, backend, starts * len(spec.ratios),
                            False if args.no_progress else None, args.device):
                 return 130
+            marched = time.perf_counter() - begin  # before the FMU's checks
             found, outcome = study.outcome(spec, done)
             checks = study.checks(spec, found, outcome, backend)
         finally:
@@ -90,7 +91,7 @@ def command(args) -> int:
         instance.free()
         discard(unzipdir)
     cycles = sum(record["cycles"] for record in done.values())
-    report = study.write(spec, found, outcome, checks, folder, time.perf_counter() - begin, cycles)
+    report = study.write(spec, found, outcome, checks, folder, time.perf_counter() - begin, cycles, marched)
     print(f"{PROG} fractions: {report['frequencies']} frequencies x {starts} starts, {len(report['attractors'])} "
           f"attractors: {', '.join(report['attractors'])}")
     checked = report["fmu_checks"]

@@ -208,7 +208,7 @@ def _shares_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: 
 
 
 def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
-          cycles: int) -> dict:
+          cycles: int, marching: float | None = None) -> dict:
     from ...datasets import save_dataset
     from .figure import draw
     from .transients import by_frequency, draw_transients
@@ -235,7 +235,7 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
     undecided = [{"ratio": row["ratio"], "share": row["undecided"], "starts": row["undecided_starts"]}
                  for row in transients.to_dict("records") if row["undecided_starts"]]
     report = {"frequencies": len(spec.ratios), "starts_per_frequency": spec.starts, "wall_s": wall,
-              "start_periods": cycles, "budget_periods": spec.max_cycles,
+              "marching_wall_s": marching, "start_periods": cycles, "budget_periods": spec.max_cycles,
               "undecided": {"frequencies": len(undecided), "starts": sum(u["starts"] for u in undecided),
                             "where": undecided},
               "attractors": [str(n) for n in ds["attractor_name"].values],
