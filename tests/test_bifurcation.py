@@ -92,13 +92,21 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
         marcher.close()
 
 
-def test_one_process_draws_the_diagram_the_process_pool_draws(diagram, tmp_path):
+def test_one_process_draws_the_diagram_the_process_pool_draws(diagram):
     """The chains and the clouds are tasks of their own, finished in whatever order the workers
     take them: one process, running them one after the other, gives every point the same."""
-    assert run_cli("bifurcation", "--ratio-min", 0.98, "--ratio-max", 1.02, "--count", 3, "--max-cycles", 400,
-                   "--jobs", 1, "--confirm", 0, "--out", tmp_path, "--fmu", FMU) == 0
-    pool, alone = (json.loads((folder / "points.json").read_text()) for folder in (diagram, tmp_path))
-    for a, b in zip(pool["sweeps"], alone["sweeps"]):
+    from piezo_fmu_harness.engine import InProcess
+    from piezo_fmu_harness.periodic.band import FrequencySpec, Settings
+    from piezo_fmu_harness.studies.bifurcation import study
+
+    pool = json.loads((diagram / "points.json").read_text())
+    ds = open_dataset(diagram / "bifurcation.nc")
+    up = pool["sweeps"][0]["points"]
+    spec = FrequencySpec(tuple(float(r) for r in ds["ratio"].values), up[0]["omega"] / up[0]["ratio"],
+                         up[0]["amplitude_Y"], None, pool["values"], 0.0, Settings(**json.loads(ds.attrs["settings"])))
+    alone, _ = study.run(spec, InProcess(None), progress=False)
+    assert [len(s["points"]) for s in alone] == [len(s["points"]) for s in pool["sweeps"]] == [3, 3]
+    for a, b in zip(pool["sweeps"], alone):
         for p, q in zip(a["points"], b["points"]):
             assert {k: v for k, v in p.items() if k != "cpu_seconds"} == {k: v for k, v in q.items() if k != "cpu_seconds"}
 
