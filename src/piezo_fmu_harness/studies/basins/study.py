@@ -188,7 +188,8 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
                  [r["label"] >= 0 for r in records if r["label"] != -2], spec.max_cycles)
     undecided = sum(1 for r in records if str(r.get("motion", "")).startswith("undecided"))
     report = {"ratio": spec.ratio, "starts": count, "grid": list(shape), "wall_s": wall,
-              "marching_wall_s": marching, "budget_periods": spec.max_cycles, "undecided": {"starts": undecided, "share": undecided / count},
+              "marching_wall_s": marching, "budget_periods": spec.max_cycles,
+              "undecided": {"starts": undecided, "share": undecided / count},
               "transients": counts(fit),
               "attractors": [_summary_row(row, name, relabel) for row, name in zip(rows, names)],
               "boundary": boundary(ds["attractor"].values),

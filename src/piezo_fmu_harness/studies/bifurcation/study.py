@@ -72,7 +72,7 @@ DEFAULT_CONFIRM = 6
 
 
 def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
-    """The start ``state`` and :data:`CLOUD` companions, their velocities moved by :data:`NUDGE` of
+    """:data:`CLOUD` companions of the start ``state``, their velocities moved by :data:`NUDGE` of
     the velocities' size (at least ``Y w``; the impact mass stays where it is relative to the
     barriers)."""
     state = np.asarray(state, float)
@@ -80,7 +80,7 @@ def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
     kicks = np.random.default_rng(seed).standard_normal((CLOUD, 2)) * NUDGE * size
     others = np.repeat(state[None], CLOUD, axis=0)
     others[:, [1, 3]] += kicks
-    return np.concatenate([state[None], others])
+    return others
 
 
 def frequency(instance, spec: dict, direction: str, number: int, state: list, side: float) -> dict:
@@ -91,9 +91,9 @@ def frequency(instance, spec: dict, direction: str, number: int, state: list, si
     cloud (:func:`companions`) before its motion is known."""
     from piezo_fmu.solver.batch import describe, settle
 
-    ratio, omega, amplitude, drive, settings = _drive(spec, direction, number)
+    ratio, omega, amplitude, params, drive, settings = _drive(spec, direction, number)
     begin = time.process_time()
-    settled = settle(damper_of(spec), drive, [state], settings=settings, device=spec["device"], sides=[side])
+    settled = settle(params, drive, [state], settings=settings, device=spec["device"], sides=[side])
     label = int(settled.labels[0])
     point = {"ratio": ratio, "omega": omega, "amplitude_Y": amplitude, "start": list(state),
              "start_side": side, "periods": int(settled.periods[0]), "status": "ok", "lifetime": None,
@@ -125,26 +125,20 @@ def companions(instance, spec: dict, direction: str, number: int, state: list, s
     (``label``, ``periods``) and the CPU time."""
     from piezo_fmu.solver.batch import settle
 
-    _, omega, amplitude, drive, settings = _drive(spec, direction, number)
+    _, omega, amplitude, params, drive, settings = _drive(spec, direction, number)
     begin = time.process_time()
-    starts = cloud(state, omega, amplitude, number)[1:]
-    settled = settle(damper_of(spec), drive, starts, settings=settings, device=spec["device"],
+    starts = cloud(state, omega, amplitude, number)
+    settled = settle(params, drive, starts, settings=settings, device=spec["device"],
                      sides=[side] * len(starts), measured=False)
     records = [{"label": int(label), "periods": int(periods)}
                for label, periods in zip(settled.labels.tolist(), settled.periods.tolist())]
     return {"records": records, "cpu_seconds": time.process_time() - begin}
 
 
-def damper_of(spec: dict):
-    from piezo_fmu.solver.batch import damper
-
-    return damper(spec["values"])
-
-
 def _drive(spec: dict, direction: str, number: int):
     """Frequency ``number`` of the sweep ``direction``: its ratio to ``sqrt(K/M)``, ``omega``
-    (rad/s), ``Y`` (m), its drive and the march's settings."""
-    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings
+    (rad/s), ``Y`` (m), the damper, its drive and the march's settings."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, damper
 
     ratios = spec["ratios"] if direction == "up" else spec["ratios"][::-1]
     ratio = ratios[number]
@@ -152,7 +146,8 @@ def _drive(spec: dict, direction: str, number: int):
     amplitude = spec["amplitude"] if spec["amplitude"] is not None else spec["acceleration"] / omega**2
     settings = SettleSettings(tolerance=spec["settings"]["tolerance"], max_cycles=spec["settings"]["max_cycles"],
                               block=BLOCK)
-    return ratio, omega, amplitude, HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"]), settings
+    drive = HarmonicHold(omega, amplitude, 0.0, spec["settings"]["samples"])
+    return ratio, omega, amplitude, damper(spec["values"]), drive, settings
 
 
 def judged(point: dict, record: dict, clouded: dict) -> dict:
