@@ -142,7 +142,7 @@ def payloads(spec: BasinSpec, found: list[dict], starts: dict):
 
 
 def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
-          marching: float | None = None) -> dict:
+          marching: float) -> dict:
     import xarray as xr
 
     from ...datasets import save_dataset

@@ -208,7 +208,7 @@ def _shares_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: 
 
 
 def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
-          cycles: int, marching: float | None = None) -> dict:
+          cycles: int, marching: float) -> dict:
     from ...datasets import save_dataset
     from .figure import draw
     from .transients import by_frequency, draw_transients
