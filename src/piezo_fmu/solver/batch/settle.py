@@ -247,7 +247,8 @@ def _extend(history, record, keep: int) -> dict:
 
 
 def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marched) -> None:
-    for g in np.unique(groups):
+    # one drive (a sweep's point, its cloud): every trajectory is of group 0, no search for groups
+    for g in (0,) if len(linear) == 1 else np.unique(groups):
         mask = (groups == g) & (state.labels[ids] == -1)
         if not mask.any():
             continue
@@ -303,18 +304,24 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
     if not open_.any():
         return
     chosen: dict[int, list] = {}
+    most = min(settings.max_order, (span - 2) // 3)  # the orders 1 to most
+    if most < 1:
+        return
     scale = scales[groups]
     size = np.abs(sections[-1] * scale).max(axis=1)
-    orders = np.arange(1, min(settings.max_order, (span - 2) // 3) + 1)
-    # the return over each order at the history's start and at its end, all orders at once
-    first = np.abs((sections[orders] - sections[0]) * scale).max(axis=2)
-    last = np.abs((sections[-1] - sections[-1 - orders]) * scale).max(axis=2)
+    # the return over each order at the history's start and at its end, all orders at once (row
+    # k is the order k + 1: sections[1:] and, backwards from the last but one, sections[span - 2::-1])
+    first = np.abs((sections[1:most + 1] - sections[0]) * scale).max(axis=2)
+    last = np.abs((sections[-1] - sections[span - 2::-1][:most]) * scale).max(axis=2)
     shrinking = open_ & (last < 0.5 * first) & (last <= SEED_REACH * size)
+    rows = np.flatnonzero(shrinking.any(axis=1))
+    if not rows.size:
+        return
     # the impacts and the side of each period in one number: the same sequence is the same numbers
     sequence = 3 * impacts + (np.asarray(sides, np.int64) + 1)
     taken: set = set()
-    for k in np.flatnonzero(shrinking.any(axis=1)):
-        order = int(orders[k])
+    for k in rows.tolist():
+        order = k + 1
         converging = shrinking[k] & (sequence[order:] == sequence[:-order]).all(axis=0)
         for j in np.flatnonzero(converging).tolist():
             if j not in taken:
@@ -345,18 +352,25 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
 def _spread(seeds, groups, last, scales, state, most: int) -> list:
     """At most ``most`` seeds per drive, none near a known orbit or another seed."""
     picked: list = []
+    per_group: dict = {}
+    known: dict = {}  # per drive: the known orbits' points, and each point's reach (its orbit's)
     for j in seeds:
         g = groups[j]
-        if sum(groups[k] == g for k in picked) >= most:
+        if per_group.get(g, 0) >= most:
             continue
         scale = scales[g]
-        near_known = any(o.group == g and np.abs((o.sections - last[j]) * scale).max(axis=1).min()
-                         <= LINEAR_REACH * max(np.abs(o.sections * scale).max(), 1e-300)
-                         for o in state.attractors + state.unstable if isinstance(o, Orbit))
+        if g not in known:
+            orbits = [o for o in state.attractors + state.unstable if isinstance(o, Orbit) and o.group == g]
+            known[g] = (np.concatenate([o.sections for o in orbits]) if orbits else np.empty((0, 4)),
+                        np.concatenate([np.full(o.order, LINEAR_REACH * max(np.abs(o.sections * scale).max(), 1e-300))
+                                        for o in orbits]) if orbits else np.empty(0))
+        points, reach = known[g]
+        near_known = bool((np.abs((points - last[j]) * scale).max(axis=1) <= reach).any())
         near_seed = any(groups[k] == g and np.abs((last[k] - last[j]) * scale).max()
                         <= LINEAR_REACH * np.abs(last[j] * scale).max() for k in picked)
         if not near_known and not near_seed:
             picked.append(j)
+            per_group[g] = per_group.get(g, 0) + 1
     return picked
 
 
