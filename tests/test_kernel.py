@@ -159,6 +159,28 @@ def test_the_gpu_code_is_the_same_source_run_on_numbas_cuda_simulator(tmp_path):
     assert scaled_gap(gpu["sections"], cpu["sections"], 1.25 * W_N) < 1e-12
 
 
+def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine_has(tmp_path):
+    """``benchmarks/bench_gpu.py`` (the one call a session lent a GPU makes) on numba's CUDA
+    simulator, tiny sizes, run from the source tree (``PYTHONPATH=src``): it reports each throughput
+    row and finds the GPU path's sections equal to the CPU's."""
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT / "src"))
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_gpu.py"), "--sizes", "3,5",
+                             "--periods", "2", "--agree", "4", "--agree-periods", "2"],
+                            capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads(result.stdout)
+    assert report["simulator"] is True
+    assert [row["starts"] for row in report["throughput"]] == [3, 5]
+    for row in report["throughput"]:
+        for name in ("gpu_with_transfers", "gpu_resident", "cpu_every_core"):
+            assert row[name]["start_periods_per_s"] > 0.0, name
+    agreement = report["agreement"]
+    assert agreement["impacting"] > 0
+    assert agreement["same_onsets_every_period"] == agreement["starts"] == 4
+    assert agreement["max_difference_all_m"] <= 1e-12
+    assert report["target"]["met"] is False  # 5 starts are not a million
+
+
 def test_without_a_gpu_the_gpu_device_says_what_is_missing():
     error = device_error("gpu")
     assert error is not None and error.startswith("device = 'gpu': ") and "allowed devices here: 'cpu'" in error
