@@ -248,8 +248,9 @@ def separate(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray,
 
 
 def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs: int) -> None:
-    """Run the driver ``name`` over ``n`` trajectories; on a GPU, copy the arguments there and the
-    ``updated`` ones and the last ``outputs`` back."""
+    """Run the driver ``name`` over ``n`` trajectories; on a GPU, copy the inputs there (the last
+    ``outputs`` arguments are only allocated there: the kernel writes them whole) and the
+    ``updated`` ones and the outputs back."""
     compiled = target(device)[name]
     if n == 0:
         return
@@ -257,7 +258,10 @@ def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs
         compiled(*args)
         return
     from numba import cuda
-    on_device = [cuda.to_device(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) else a for a in args]
+    first_output = len(args) - outputs
+    # the outputs are written whole by the kernel: allocated there, never copied in
+    on_device = [a if not isinstance(a, np.ndarray) else cuda.device_array_like(a) if k >= first_output
+                 else cuda.to_device(np.ascontiguousarray(a)) for k, a in enumerate(args)]
     compiled[(n + GPU_THREADS - 1) // GPU_THREADS, GPU_THREADS](*on_device)
-    for k in list(updated) + list(range(len(args) - outputs, len(args))):
+    for k in list(updated) + list(range(first_output, len(args))):
         on_device[k].copy_to_host(args[k])
