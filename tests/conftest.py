@@ -29,8 +29,8 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 SHARED_CACHE = ("test_windows.py", "test_standalone.py", "test_standalone_windows.py")
 #: The groups that take longest (seconds on 2 cores, ``--durations``), handed out first so that no
 #: worker is left with a long one at the end.
-LONGEST = ("wine", "test_fractions.py", "test_stability.py", "test_optimize.py", "test_masri_caughey.py",
-           "test_continuation.py", "test_bifurcation.py", "test_frequency_response.py", "test_packaging.py")
+LONGEST = ("test_fractions.py", "wine", "test_optimize.py", "test_stability.py", "test_bifurcation.py",
+           "test_masri_caughey.py", "test_frequency_response.py", "test_continuation.py", "test_packaging.py")
 
 
 def group_of(path: Path) -> str:
