@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import sys
@@ -50,21 +49,12 @@ from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, descr
 from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble  # noqa: E402
 from piezo_fmu_harness import cli  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
-from piezo_fmu_harness.periodic.band import linear_transmissibility  # noqa: E402
 from piezo_fmu_harness.periodic.confirm import fmu_label  # noqa: E402
+# the starts, the drive and the damper of both benchmarks, and the GPU's measures, written once in bench_gpu.py
+from bench_gpu import RATIO, VALUES, W_N, Y, starts, with_transfers  # noqa: E402
+from bench_gpu import agreement as gpu_agreement  # noqa: E402
 from piezo_fmu_harness.periodic.drive import HarmonicDrive  # noqa: E402
 
-W_N = math.sqrt(1000.0)
-RATIO, Y = 1.2, 1e-3
-#: The damper as the studies run it: the circuit one-way at the load near the optimum.
-VALUES = {"voltage_model": 1, "R_load": 3.59e6}
-
-
-def starts(count: int, omega: float) -> np.ndarray:
-    span = 2.0 * Y * float(linear_transmissibility(omega, 1.0, 1000.0, 0.1))
-    rng = np.random.default_rng(2026)
-    p0 = rng.uniform(-span, span, count)
-    return np.stack([p0, rng.uniform(-span * omega, span * omega, count), p0, np.zeros(count)], axis=1)
 
 
 #: Start-periods each throughput figure marches (the periods are this over the starts, at least 2):
@@ -116,16 +106,6 @@ def compile_times() -> dict:
             result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
             times[name] = float(result.stdout.split()[-1])
     return times
-
-
-def same_motion(cpu: dict, gpu: dict) -> dict:
-    """How far the GPU's sections are from the CPU's, the same starts marched the same periods, and
-    how many starts made the same contact onsets in every period."""
-    gap = np.abs(cpu["sections"] - gpu["sections"]).max(axis=(0, 2))
-    onsets = (cpu["impacts"] == gpu["impacts"]).all(axis=0)
-    return {"max_section_difference_m": float(gap.max()), "median_section_difference_m": float(np.median(gap)),
-            "starts_within_1e-9_m": int((gap <= 1e-9).sum()), "starts_same_onsets": int(onsets.sum()),
-            "starts": int(gap.size)}
 
 
 def fmu_rate(instance: Instance, states: np.ndarray, omega: float, periods: int) -> dict:
@@ -217,12 +197,10 @@ def main() -> int:
                   "speedup": rate(kernel[10_000]) / rate(fmu), "single": rate(kernel[1]) / rate(fmu),
                   "jit": compile_times()}
         report.update(agreement(instance, states[:args.fmu_starts], omega))
-        if device_error("gpu") is None:
-            marched: list = []
-            batch_rate(Ensemble, states[:10_000], drive, "cpu", marched, periods=20)
-            report["kernel_gpu"] = [batch_rate(Ensemble, states[:10_000], drive, "gpu", marched, periods=20),
-                                    batch_rate(Ensemble, starts(1_000_000, omega), drive, "gpu", periods=10)]
-            report["gpu_against_cpu"] = same_motion(*marched)
+        if device_error("gpu") is None:  # bench_gpu.py's measures
+            report["kernel_gpu"] = [with_transfers("gpu", states[:10_000], drive, 20),
+                                    with_transfers("gpu", starts(1_000_000, omega), drive, 10)]
+            report["gpu_against_cpu"] = gpu_agreement(states[:10_000], drive, 20)
         else:
             report["kernel_gpu"] = None
             report["gpu"] = device_error("gpu")

@@ -8,7 +8,7 @@ runs as it is on a GPU machine whose Python image carries numba-cuda and can ins
 device machines lent to some sessions: one call, within minutes). ``bench_batch.py`` measures the
 same GPU figures beside the FMU's where the whole harness is installed.
 
-Random starts at 1.2 sqrt(K/M) as ``bench_batch.py`` draws them (the nominal damper, ``Y`` = 1 mm,
+Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper, ``Y`` = 1 mm,
 64 hold steps a period):
 
 1. **Compile**: the first GPU march (numba's CUDA compilation and the launch), in seconds.
@@ -50,7 +50,7 @@ from piezo_fmu.solver.batch.phases import BatchModel  # noqa: E402
 
 W_N = math.sqrt(1000.0)
 RATIO, Y = 1.2, 1e-3
-#: The damper as bench_batch.py runs it: the circuit one-way at the load near the optimum.
+#: The damper as the studies run it: the circuit one-way at the load near the optimum.
 VALUES = {"voltage_model": 1, "R_load": 3.59e6}
 #: Marches each throughput figure is the median of.
 REPEATS = 3
@@ -59,8 +59,8 @@ TARGET = 100e6
 
 
 def starts(count: int, omega: float) -> np.ndarray:
-    """``bench_batch.starts``: ``p0`` and ``p0'/w`` within two linear amplitudes, the impact mass at
-    rest in the middle (its drawing repeated here: that module imports the harness)."""
+    """Random starts (seeded): ``p0`` and ``p0'/w`` within two linear amplitudes, the impact mass at
+    rest in the middle. ``bench_batch.py`` marches the same."""
     M, K, C = 1.0, 1000.0, 0.1  # the nominal main body (``linear_transmissibility`` of the harness)
     transmissibility = np.sqrt((K**2 + (C * omega) ** 2) / ((K - M * omega**2) ** 2 + (C * omega) ** 2))
     span = 2.0 * Y * float(transmissibility)
