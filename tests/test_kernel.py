@@ -72,6 +72,85 @@ def test_the_source_run_as_python_gives_the_compiled_kernels_bits(case):
         assert np.array_equal(compiled[name], values), name
 
 
+def march_both(run, n, periods, failed):
+    """The outputs, final states and failures of ``run(flat, state, failed, outputs)`` for the
+    nested march and the flat one, from the same ``(7, n)`` states."""
+    results = []
+    for flat in (False, True):
+        out = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
+               np.empty((periods, n)), np.empty((periods, n)))
+        bad = failed.copy()
+        state = run(flat, bad, out)
+        results.append((out, state, bad))
+    return results
+
+
+def assert_same_bits(nested, flat):
+    for a, b in zip(nested[0] + (nested[1], nested[2]), flat[0] + (flat[1], flat[2])):
+        assert np.array_equal(a, b, equal_nan=True)
+
+
+@pytest.mark.parametrize("case", DAMPERS)
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_the_gpus_flat_march_gives_the_nested_marchs_bits(case, ratio):
+    """The flat loop the GPU runs (``kernel_flow``) and the nested loops the CPU runs, both
+    compiled for the CPU: every output, the final states and the failures bit for bit, from random
+    starts (most impacting; some failed before the march) and starts at a barrier."""
+    params = DAMPERS[case]
+    drive = HarmonicHold(ratio * W_N, 1e-3)
+    tables = kernel.Tables(BatchModel.of(params), [drive])
+    starts = random_starts(params, 1500, seed=4)
+    # and starts at a barrier, within rounding of it (the searches' held first step and the onsets
+    # due at once), moving in, out and along
+    rng = np.random.default_rng(6)
+    at = starts[:300].copy()
+    at[:, 2] = at[:, 0] + np.sign(rng.uniform(-1, 1, 300)) * params.d / 2 * (1 + rng.integers(-20, 21, 300) * 1e-14)
+    at[:, 3] = at[:, 1] + rng.choice([-1e-3, 0.0, 1e-3], 300)
+    starts = np.concatenate([starts, at])
+    failed = np.zeros(len(starts), bool)
+    failed[::300] = True
+
+    def run(flat, bad, out):
+        state = np.zeros((7, len(starts)))
+        state[:4] = starts.T
+        got = kernel.march("cpu", tables, state, bad, np.zeros(len(starts), np.int64), 6, True, flat=flat)
+        for k, name in enumerate(("sections", "sides", "impacts", "top", "bottom")):
+            out[k][...] = got[name]
+        return state
+
+    nested, flat = march_both(run, len(starts), 6, failed)
+    assert nested[0][2].sum() > 3 * len(starts)
+    assert_same_bits(nested, flat)
+
+
+@pytest.mark.parametrize("cap", [{"MAX_ITERATIONS": 5}, {"MAX_ROUNDS": 1}])
+def test_the_flat_march_fails_where_the_nested_one_does(cap):
+    """With the event search or the rounds of a step capped low (the source run as Python), every
+    start fails in its first period, after at least one onset: both loops fail at the same instant
+    and leave the same NaNs, voltages and onset counts."""
+    params = DAMPERS["coupled circuit"]
+    drive = HarmonicHold(1.25 * W_N, 1e-3)
+    tables = kernel.Tables(BatchModel.of(params), [drive])
+    plain = kernel._compiled(lambda f: f, {})
+    plain.update(cap)
+    starts = random_starts(params, 8, seed=5)
+    n, periods = len(starts), 2
+
+    def run(flat, bad, out):
+        state = np.zeros((7, n))
+        state[:4] = starts.T
+        march = plain["march_one_flat" if flat else "march_one"]
+        for i in range(n):
+            march(True, i, state, bad, np.zeros(n, np.int64), *tables.arguments(), *out, np.empty(plain["WORK"]))
+        return state
+
+    nested, flat = march_both(run, n, periods, np.zeros(n, bool))
+    (sections, _, impacts, _, _), _, failed = nested
+    assert failed.all() and np.isnan(sections).all()
+    assert (impacts[0] >= 1).all() and (impacts[1] == 0).all()
+    assert_same_bits(nested, flat)
+
+
 @pytest.mark.parametrize("case", DAMPERS)
 def test_the_kernel_marches_the_array_engines_motion(case):
     """From random starts (most impacting), one period on the kernel and on the array engine: the
@@ -179,6 +258,21 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     assert agreement["same_onsets_every_period"] == agreement["starts"] == 4
     assert agreement["max_difference_all_m"] <= 1e-12
     assert report["target"]["met"] is False  # 5 starts are not a million
+
+
+def test_a_numba_cuda_that_cannot_compile_with_this_numpy_is_named_before_any_march():
+    """numba-cuda 0.30.4 compiles nothing with numpy 2.5 (``np.row_stack`` is gone; seen on a lent
+    H200): the GPU device says which packages and why, instead of a traceback at the first march."""
+    code = ("from piezo_fmu.solver.batch import device_error\n"
+            "import numpy\n"
+            "del numpy.row_stack  # as numpy 2.5 has it\n"
+            "print(device_error('gpu'))\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+    assert result.returncode == 0, result.stderr[-3000:]
+    message = result.stdout.strip()
+    assert message.startswith("device = 'gpu': numba-cuda ") and "cannot compile with numpy" in message
+    assert "row_stack" in message and "allowed devices here: 'cpu'" in message
 
 
 def test_without_a_gpu_the_gpu_device_says_what_is_missing():

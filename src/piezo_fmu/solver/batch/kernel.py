@@ -27,19 +27,30 @@ from pathlib import Path
 
 import numpy as np
 
+from . import kernel_flow as flow
 from . import kernel_phases as physics
 from . import kernel_source as source
 from .phases import BatchModel
 
 #: The functions of the source, in the order they are compiled (each calls only earlier ones).
 FUNCTIONS = ("fmax", "fmin", "sign", "free_coefficients", "free_apply", "safe_step", "start_sign", "free_values",
-             "contact_value", "locate", "free_event", "contact_event", "contact_state", "event_rounds", "hold_step",
-             "hermite_extremes", "one_period", "march_one", "separate_one")
+             "contact_value", "locate_step", "locate", "free_start", "free_event", "contact_start", "contact_event",
+             "contact_state", "round_start", "round_end", "contact_voltage", "event_rounds", "free_step", "hold_step",
+             "hermite_extremes", "one_period", "march_one", "separate_one", "march_one_flat")
 #: Small functions compiled into their callers on the CPU (a call of a compiled function costs
 #: about as much as their work); the GPU compiler inlines device functions by itself.
-INLINE = ("fmax", "fmin", "sign", "free_apply", "safe_step", "start_sign")
+INLINE = ("fmax", "fmin", "sign", "free_apply", "safe_step", "start_sign", "locate_step", "free_start", "contact_start",
+          "round_start", "round_end", "contact_voltage", "free_step")
 #: Threads a block of the GPU launch.
 GPU_THREADS = 128
+#: Registers a GPU thread may use: fewer than the compiler would take (142 for the flat march) let
+#: more warps share a multiprocessor, and the rest spill to cached local memory. Measured on an H200
+#: (``docs/benchmarks.md``), the flat march at a million starts: 55.6 million start-periods a second
+#: uncapped, 61.6 at 128 registers, 57.8 at 96, 41.3 at 64 (the same bits at each).
+GPU_REGISTERS = 128
+#: How each target marches: the nested loops of :func:`.kernel_source.march_one` on the CPU, the
+#: flat loop of :func:`.kernel_flow.march_one_flat` on a GPU (the same bits, see :mod:`.kernel_flow`).
+FLAT = {"cpu": False, "gpu": True}
 
 _lock = threading.Lock()
 _targets: dict = {}
@@ -63,7 +74,7 @@ def _compiled(jit, drivers: dict, inline=None) -> dict:
     """The source's functions compiled by ``jit`` (those of :data:`INLINE` by ``inline``, when
     given), and the ``drivers`` (name: (function, jit)) beside them, all with their globals in one
     namespace."""
-    namespace = {k: v for module in (physics, source) for k, v in vars(module).items() if not k.startswith("__")}
+    namespace = {k: v for module in (physics, source, flow) for k, v in vars(module).items() if not k.startswith("__")}
     for name in FUNCTIONS:
         compiler = inline if inline is not None and name in INLINE else jit
         namespace[name] = compiler(_copy(namespace[name], namespace, name))
@@ -80,6 +91,12 @@ def _march_cpu(observe, state, failed, groups, drive, c, sections, sides, impact
         march_one(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
 
 
+def _march_flat_cpu(observe, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
+    for i in prange(state.shape[1]):  # noqa: F821
+        work = np.empty(WORK)  # noqa: F821
+        march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
+
+
 def _separate_cpu(state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms):
     for i in prange(state.shape[1]):  # noqa: F821
         work = np.empty(WORK)  # noqa: F821
@@ -90,13 +107,15 @@ def _separate_cpu(state, failed, groups, offset, scale, delta, drive, c, logs, s
 def _cpu() -> dict:
     import numba
     from . import kernel_cache
-    kernel_cache.install((physics.__file__, source.__file__, __file__), cache_dir())
+    kernel_cache.install((physics.__file__, source.__file__, flow.__file__, __file__), cache_dir())
     # The inner functions touch no reference-counted object: without numba's runtime (``_nrt``)
     # their array arguments are not counted at every call, which cost more than the physics.
     options = dict(cache=True, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
     jit, inline = numba.njit(**options), numba.njit(inline="always", **options)
     parallel = numba.njit(cache=True, parallel=True, error_model="numpy")
-    namespace = _compiled(jit, {"march": (_march_cpu, parallel), "separate": (_separate_cpu, parallel)}, inline)
+    drivers = {"march": (_march_cpu, parallel), "march_flat": (_march_flat_cpu, parallel),
+               "separate": (_separate_cpu, parallel)}
+    namespace = _compiled(jit, drivers, inline)
     namespace.update(np=np, prange=numba.prange)
     return namespace
 
@@ -110,6 +129,13 @@ def _march_gpu(observe, state, failed, groups, drive, c, sections, sides, impact
         march_one(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
 
 
+def _march_flat_gpu(observe, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms):
+    i = cuda.grid(1)  # noqa: F821
+    if i < state.shape[1]:
+        work = cuda.local.array(WORK, float64)  # noqa: F821
+        march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work)  # noqa: F821
+
+
 def _separate_gpu(state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms):
     i = cuda.grid(1)  # noqa: F821
     if i < state.shape[1]:
@@ -121,7 +147,11 @@ def _separate_gpu(state, failed, groups, offset, scale, delta, drive, c, logs, s
 def _gpu() -> dict:
     from numba import cuda, float64
     device = cuda.jit(device=True)
-    namespace = _compiled(device, {"march": (_march_gpu, cuda.jit), "separate": (_separate_gpu, cuda.jit)})
+    from numba import config
+    # numba's CUDA simulator (the tests' GPU) takes no register limit
+    launch = cuda.jit if config.ENABLE_CUDASIM else cuda.jit(max_registers=GPU_REGISTERS)
+    namespace = _compiled(device, {"march": (_march_gpu, launch), "march_flat": (_march_flat_gpu, launch),
+                                   "separate": (_separate_gpu, launch)})
     namespace.update(cuda=cuda, float64=float64)
     return namespace
 
@@ -132,6 +162,15 @@ def gpu_error() -> str | None:
         from numba import cuda
     except ImportError as error:
         return f"device = 'gpu': numba's CUDA target (the package numba-cuda) is needed ({error}); allowed devices here: 'cpu'"
+    from numba import config
+    if not config.ENABLE_CUDASIM:
+        try:  # what numba-cuda's first compilation imports: it fails there on a numpy it does not know
+            import numba.cuda.cudaimpl  # noqa: F401
+        except Exception as error:
+            import numba_cuda
+            return (f"device = 'gpu': numba-cuda {getattr(numba_cuda, '__version__', '?')} cannot compile with numpy "
+                    f"{np.__version__} ({type(error).__name__}: {error}); install a numpy it supports (numba-cuda "
+                    f"0.30.4 needs numpy < 2.5) or another numba-cuda; allowed devices here: 'cpu'")
     try:
         available = cuda.is_available()
     except Exception as error:  # the driver's own error
@@ -218,15 +257,17 @@ def _modes(lam: np.ndarray) -> tuple[list, list]:
 
 
 def march(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray, groups: np.ndarray,
-          periods: int, observe: bool = True) -> dict:
+          periods: int, observe: bool = True, flat: bool | None = None) -> dict:
     """March every trajectory of ``state`` ((7, n) host: ``p, p', q, q'``, side, left and right
     voltage; updated in place, as is ``failed``) ``periods`` periods. Returns host arrays:
     ``sections`` (periods, n, 4), ``sides`` and ``impacts`` (periods, n), and with ``observe``
-    ``top`` and ``bottom`` (NaN without)."""
+    ``top`` and ``bottom`` (NaN without). ``flat`` chooses the flat loop or the nested one (the
+    target's own, :data:`FLAT`, when None): the same bits."""
     n = state.shape[1]
     outputs = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
                np.empty((periods, n)), np.empty((periods, n)))
-    _launch(device, "march", (observe, state, failed, groups) + tables.arguments() + outputs, n, (1, 2), 5)
+    name = "march_flat" if (FLAT[device] if flat is None else flat) else "march"
+    _launch(device, name, (observe, state, failed, groups) + tables.arguments() + outputs, n, (1, 2), 5)
     sections, sides, impacts, top, bottom = outputs
     return {"sections": sections, "sides": sides.astype(np.int64), "impacts": impacts, "top": top, "bottom": bottom}
 

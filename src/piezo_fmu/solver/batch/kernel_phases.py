@@ -143,6 +143,29 @@ def contact_value(s, c, work, t):
     return -s * total, -s * rate
 
 
+def locate_step(contact, t, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, remaining, bound, c, u, du, w, dw, s,
+                work):
+    """One iteration of :func:`locate`: ``(done, time, which, failed, t, g_a, g_b, dg_a, dg_b, tol)``,
+    the last six the search's state for the next iteration (the event functions at ``t``)."""
+    fired_a = g_a >= -tol and dg_a > 0.0 and not held_a
+    fired_b = g_b >= -tol and dg_b > 0.0 and not held_b
+    if fired_a or fired_b:
+        return True, t, 0 if fired_a else 1, False, t, g_a, g_b, dg_a, dg_b, tol
+    step_a = safe_step(-tol if g_a >= -tol else fmin(g_a, 0.0), dg_a, bound)
+    step_b = safe_step(-tol if g_b >= -tol else fmin(g_b, 0.0), dg_b, bound)
+    after = t + fmin(step_a, step_b)
+    if after >= remaining:
+        return True, INF, 0, False, t, g_a, g_b, dg_a, dg_b, tol
+    if not math.isfinite(after):
+        return True, INF, 0, True, t, g_a, g_b, dg_a, dg_b, tol
+    t = after
+    if contact:
+        g_a, dg_a = contact_value(s, c, work, t)
+    else:
+        g_a, g_b, dg_a, dg_b, tol = free_values(c, work, u, du, w, dw, t)
+    return False, INF, 0, False, t, g_a, g_b, dg_a, dg_b, tol
+
+
 def locate(contact, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, remaining, bound, c, u, du, w, dw, s, work):
     """The first zero of a trajectory's event functions from its phase start on, within
     ``remaining`` (``events.locate``): ``(time, which, failed)``, ``time`` inf when none. Free
@@ -152,29 +175,17 @@ def locate(contact, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, remaining, bound,
     held_a, held_b = near_a, near_b
     t = 0.0
     for _ in range(MAX_ITERATIONS):
-        fired_a = g_a >= -tol and dg_a > 0.0 and not held_a
-        fired_b = g_b >= -tol and dg_b > 0.0 and not held_b
-        if fired_a or fired_b:
-            return t, 0 if fired_a else 1, False
-        step_a = safe_step(-tol if g_a >= -tol else fmin(g_a, 0.0), dg_a, bound)
-        step_b = safe_step(-tol if g_b >= -tol else fmin(g_b, 0.0), dg_b, bound)
-        after = t + fmin(step_a, step_b)
-        if after >= remaining:
-            return INF, 0, False
-        if not math.isfinite(after):
-            return INF, 0, True
-        t = after
-        if contact:
-            g_a, dg_a = contact_value(s, c, work, t)
-        else:
-            g_a, g_b, dg_a, dg_b, tol = free_values(c, work, u, du, w, dw, t)
+        done, time, which, failed, t, g_a, g_b, dg_a, dg_b, tol = locate_step(
+            contact, t, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, remaining, bound, c, u, du, w, dw, s, work)
+        if done:
+            return time, which, failed
         held_a = held_b = False
     return INF, 0, True
 
 
-def free_event(c, work, u, du, w, dw, rem):
-    """The next contact onset of a free trajectory within ``rem`` (s): ``(time, barrier,
-    failed)``, time inf when none (``rounds._free_events``)."""
+def free_start(c, work, u, du, w, dw):
+    """The start of :func:`free_event`: ``(now, barrier, g_a, g_b, dg_a, dg_b, tol, near_a, near_b,
+    bound)``, ``now`` when an onset is due at once (at ``barrier``), else the search's start."""
     hg = c[HG]
     work[FREE_AT] = NAN
     r, dr = w - u, dw - du
@@ -185,17 +196,24 @@ def free_event(c, work, u, du, w, dw, rem):
     near_a, near_b = abs(g_a) <= zero, abs(g_b) <= zero
     now_a = near_a and start_sign(dr, rate_noise, c[KK], c[CC], u, du, 1.0) > 0.0
     now_b = near_b and start_sign(-dr, rate_noise, c[KK], c[CC], u, du, -1.0) > 0.0
-    if now_a or now_b:
-        return 0.0, 1.0 if now_a else -1.0, False
     bound = c[BOUND_RATE] * math.sqrt(du * du + c[W2] * u * u)
-    time, which, failed = locate(False, g_a, g_b, dr, -dr, tol, near_a, near_b, rem, bound, c, u, du, w, dw, 0.0,
+    return now_a or now_b, 1.0 if now_a else -1.0, g_a, g_b, dr, -dr, tol, near_a, near_b, bound
+
+
+def free_event(c, work, u, du, w, dw, rem):
+    """The next contact onset of a free trajectory within ``rem`` (s): ``(time, barrier,
+    failed)``, time inf when none (``rounds._free_events``)."""
+    now, barrier, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, bound = free_start(c, work, u, du, w, dw)
+    if now:
+        return 0.0, barrier, False
+    time, which, failed = locate(False, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, rem, bound, c, u, du, w, dw, 0.0,
                                  work)
     return time, 1.0 if which == 0 else -1.0, failed
 
 
-def contact_event(c, u, du, w, dw, s, volt, rem, work):
-    """The separation of a trajectory in contact within ``rem`` (s): ``(time, failed)``; leaves its
-    modal amplitudes in ``work`` (``rounds._contact_events``)."""
+def contact_start(c, u, du, w, dw, s, volt, work):
+    """The start of :func:`contact_event`: ``(now, g, dg, tol, near, bound)``, ``now`` when the
+    separation is due at once, else the search's start; leaves the modal amplitudes in ``work``."""
     hg = c[HG]
     work[CONTACT_AT] = NAN
     col = (u, w - s * hg, du, dw, s * volt)
@@ -216,9 +234,17 @@ def contact_event(c, u, du, w, dw, s, volt, rem, work):
     tol = NOISE_ULPS * EPS * (abs(u) + abs(w) + hg + size)
     near = abs(delta) <= fmax(tol, ZERO * 2.0 * hg)
     rate_noise = NOISE_ULPS * EPS * (abs(dw) + abs(du))
-    if near and start_sign(rate, rate_noise, c[KK], c[CC], u, du, s) < 0.0:
+    now = near and start_sign(rate, rate_noise, c[KK], c[CC], u, du, s) < 0.0
+    return now, -delta, -rate, tol, near, bound
+
+
+def contact_event(c, u, du, w, dw, s, volt, rem, work):
+    """The separation of a trajectory in contact within ``rem`` (s): ``(time, failed)``; leaves its
+    modal amplitudes in ``work`` (``rounds._contact_events``)."""
+    now, g, dg, tol, near, bound = contact_start(c, u, du, w, dw, s, volt, work)
+    if now:
         return 0.0, False
-    time, _, failed = locate(True, -delta, -INF, -rate, 0.0, tol, near, False, rem, bound, c, u, du, w, dw, s, work)
+    time, _, failed = locate(True, g, -INF, dg, 0.0, tol, near, False, rem, bound, c, u, du, w, dw, s, work)
     return time, failed
 
 

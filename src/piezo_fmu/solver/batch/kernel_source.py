@@ -32,74 +32,100 @@ MAX_ROUNDS = 10_000
 # Offsets into a row of ``drive``: the step (s), ``e^{-a h} c(h)``, ``e^{-a h} s(h)``, the voltage's
 # decay over a step, then the nodes (m) and the slopes (m/s).
 STEP, EC, ES, DECAY, NODES = range(5)
+#: How a round ends (:func:`round_end`): another round, the step's end, or a failed location.
+GOING, DONE, FAILED = 0, 1, 2
+
+
+def round_start(p, dp, q, dq, side, y0, v, tl, h):
+    """A round's phase-relative state at ``tl`` into the step: ``(u, u', w, w', rem)``."""
+    base = y0 + v * tl
+    return p - base, dp - v, q - base, dq - v, h - tl
+
+
+def round_end(p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, to, bad, c, work):
+    """A round's end, given its event search's result ``t_ev`` (s, inf when none within the step),
+    ``to`` (the barrier of an onset) and ``bad``: the trajectory moved to the event or the step's
+    end, the switch rules applied. Returns ``(p, p', q, q', side, vl, vr, tl, instant, onsets,
+    status)``, ``status`` :data:`GOING` (another round), :data:`DONE` (the step's end) or
+    :data:`FAILED` (the state NaN)."""
+    hg = c[HG]
+    coupled = c[COUPLED] != 0.0
+    u, du, w, dw, rem = round_start(p, dp, q, dq, side, y0, v, tl, h)
+    base = y0 + v * tl
+    free = side == 0.0
+    dt = fmin(t_ev, rem)
+    switch = t_ev <= rem and not bad
+    in_contact = 0.0
+    if free:
+        if work[FREE_AT] == dt:  # the location's last evaluation: the switch
+            ec, es = work[FREE_EC], work[FREE_ES]
+        else:
+            ec, es = free_coefficients(c, dt)
+        u1, du1 = free_apply(c, ec, es, u, du)
+        w1, dw1 = w + dw * dt, dw
+    else:
+        u1, w1, du1, dw1, in_contact = contact_state(c, work, dt)
+        w1 += side * hg
+        in_contact *= side
+    base1 = base + v * dt
+    p, q, dp, dq = u1 + base1, w1 + base1, du1 + v, dw1 + v
+    if coupled:
+        fade = math.exp(-dt / c[TAU_E])
+        vl, vr = vl * fade, vr * fade
+        if not free:
+            if side < 0.0:
+                vl = in_contact
+            else:
+                vr = in_contact
+    onset = switch and free
+    release = switch and not free
+    if onset:
+        dq = (c[MI] * dq + c[M_EQ] * dp) / (c[MI] + c[M_EQ])
+        side = to
+        onsets += 1
+    elif release:
+        dp = (c[M1] * dp + c[M_EQ] * dq) / c[MM]
+        side = 0.0
+    instant = instant + 1 if switch and dt == 0.0 else 0
+    bad = bad or instant > MAX_SWITCHES_AT_ONE_INSTANT or not math.isfinite(p + q + dp + dq)
+    if bad:
+        return NAN, NAN, NAN, NAN, 0.0, vl, vr, tl, instant, onsets, FAILED
+    tl = tl + dt if switch else h + 0.0 * tl
+    if not switch or tl >= h:
+        return p, dp, q, dq, side, vl, vr, tl, instant, onsets, DONE
+    return p, dp, q, dq, side, vl, vr, tl, instant, onsets, GOING
+
+
+def contact_voltage(side, vl, vr, c):
+    """The voltage of the barrier in contact, as the contact's modes take it (0 one-way)."""
+    return (vr if side > 0.0 else vl) if c[COUPLED] != 0.0 else 0.0
 
 
 def event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work):
     """A hold step of a trajectory that may switch in it, event by event to the step's end
     (``rounds.event_rounds``): ``(p, p', q, q', side, vl, vr, onsets, failed)``."""
-    hg = c[HG]
-    coupled = c[COUPLED] != 0.0
     tl = 0.0
     instant = 0
     onsets = 0
     for _ in range(MAX_ROUNDS):
-        base = y0 + v * tl
-        u, w, du, dw = p - base, q - base, dp - v, dq - v
-        rem = h - tl
-        free = side == 0.0
+        u, du, w, dw, rem = round_start(p, dp, q, dq, side, y0, v, tl, h)
         to = 0.0
-        if free:
+        if side == 0.0:
             t_ev, to, bad = free_event(c, work, u, du, w, dw, rem)
         else:
-            volt = (vr if side > 0.0 else vl) if coupled else 0.0
-            t_ev, bad = contact_event(c, u, du, w, dw, side, volt, rem, work)
-        dt = fmin(t_ev, rem)
-        switch = t_ev <= rem and not bad
-        in_contact = 0.0
-        if free:
-            if work[FREE_AT] == dt:  # the location's last evaluation: the switch
-                ec, es = work[FREE_EC], work[FREE_ES]
-            else:
-                ec, es = free_coefficients(c, dt)
-            u1, du1 = free_apply(c, ec, es, u, du)
-            w1, dw1 = w + dw * dt, dw
-        else:
-            u1, w1, du1, dw1, in_contact = contact_state(c, work, dt)
-            w1 += side * hg
-            in_contact *= side
-        base1 = base + v * dt
-        p, q, dp, dq = u1 + base1, w1 + base1, du1 + v, dw1 + v
-        if coupled:
-            fade = math.exp(-dt / c[TAU_E])
-            vl, vr = vl * fade, vr * fade
-            if not free:
-                if side < 0.0:
-                    vl = in_contact
-                else:
-                    vr = in_contact
-        onset = switch and free
-        release = switch and not free
-        if onset:
-            dq = (c[MI] * dq + c[M_EQ] * dp) / (c[MI] + c[M_EQ])
-            side = to
-            onsets += 1
-        elif release:
-            dp = (c[M1] * dp + c[M_EQ] * dq) / c[MM]
-            side = 0.0
-        instant = instant + 1 if switch and dt == 0.0 else 0
-        bad = bad or instant > MAX_SWITCHES_AT_ONE_INSTANT or not math.isfinite(p + q + dp + dq)
-        if bad:
+            t_ev, bad = contact_event(c, u, du, w, dw, side, contact_voltage(side, vl, vr, c), rem, work)
+        p, dp, q, dq, side, vl, vr, tl, instant, onsets, status = round_end(
+            p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, to, bad, c, work)
+        if status == FAILED:
             return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True
-        tl = tl + dt if switch else h + 0.0 * tl
-        if not switch or tl >= h:
+        if status == DONE:
             return p, dp, q, dq, side, vl, vr, onsets, False
     return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True
 
 
-def hold_step(p, dp, q, dq, side, vl, vr, y0, v, h, ec, es, decay, c, work):
-    """One hold step (base ``y0 + v t`` over ``h``): free flight in one closed form when no contact
-    is possible in it, else the event rounds (``Ensemble._step``). Returns the new state, the
-    contact onsets in the step and whether the location failed."""
+def free_step(p, dp, q, dq, y0, v, h, ec, es, c):
+    """A hold step in one closed form of free flight: ``(p, p', q, q', possible)``, ``possible``
+    when a contact may fall in the step (then the step must go by event rounds instead)."""
     hg = c[HG]
     u, du = p - y0, dp - v
     u1, du1 = free_apply(c, ec, es, u, du)
@@ -109,8 +135,17 @@ def hold_step(p, dp, q, dq, side, vl, vr, y0, v, h, ec, es, decay, c, work):
     reach = fmax(abs(q - p), abs(q1 - p1)) + bound * (h * h / 8.0)
     tol = NOISE_ULPS * EPS * (abs(u) + abs(q - y0) + hg)
     margin = 2.0 * fmax(tol, ZERO * 2.0 * hg)
-    if side == 0.0 and not reach >= hg - margin:
-        return p1, dp1, q1, dq, side, vl * decay, vr * decay, 0, False
+    return p1, dp1, q1, dq, reach >= hg - margin
+
+
+def hold_step(p, dp, q, dq, side, vl, vr, y0, v, h, ec, es, decay, c, work):
+    """One hold step (base ``y0 + v t`` over ``h``): free flight in one closed form when no contact
+    is possible in it, else the event rounds (``Ensemble._step``). Returns the new state, the
+    contact onsets in the step and whether the location failed."""
+    if side == 0.0:
+        p1, dp1, q1, dq1, possible = free_step(p, dp, q, dq, y0, v, h, ec, es, c)
+        if not possible:
+            return p1, dp1, q1, dq1, side, vl * decay, vr * decay, 0, False
     return event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work)
 
 
