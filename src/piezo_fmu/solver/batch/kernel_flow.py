@@ -64,7 +64,7 @@ def march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides,
                 bad = True
             else:
                 rounds += 1
-                u, du, w, dw, rem = round_start(p, dp, q, dq, side, y0, v, tl, h)
+                u, du, w, dw, rem, _ = round_start(p, dp, q, dq, y0, v, tl, h)
                 contact = side != 0.0
                 if contact:
                     now, g_a, dg_a, tol, held_a, bound = contact_start(c, u, du, w, dw, side,

@@ -36,10 +36,10 @@ STEP, EC, ES, DECAY, NODES = range(5)
 GOING, DONE, FAILED = 0, 1, 2
 
 
-def round_start(p, dp, q, dq, side, y0, v, tl, h):
-    """A round's phase-relative state at ``tl`` into the step: ``(u, u', w, w', rem)``."""
+def round_start(p, dp, q, dq, y0, v, tl, h):
+    """A round's state relative to the base at ``tl`` into the step: ``(u, u', w, w', rem, base)``."""
     base = y0 + v * tl
-    return p - base, dp - v, q - base, dq - v, h - tl
+    return p - base, dp - v, q - base, dq - v, h - tl, base
 
 
 def round_end(p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, to, bad, c, work):
@@ -50,8 +50,7 @@ def round_end(p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, t
     :data:`FAILED` (the state NaN)."""
     hg = c[HG]
     coupled = c[COUPLED] != 0.0
-    u, du, w, dw, rem = round_start(p, dp, q, dq, side, y0, v, tl, h)
-    base = y0 + v * tl
+    u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
     free = side == 0.0
     dt = fmin(t_ev, rem)
     switch = t_ev <= rem and not bad
@@ -108,7 +107,7 @@ def event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work):
     instant = 0
     onsets = 0
     for _ in range(MAX_ROUNDS):
-        u, du, w, dw, rem = round_start(p, dp, q, dq, side, y0, v, tl, h)
+        u, du, w, dw, rem, _ = round_start(p, dp, q, dq, y0, v, tl, h)
         to = 0.0
         if side == 0.0:
             t_ev, to, bad = free_event(c, work, u, du, w, dw, rem)
