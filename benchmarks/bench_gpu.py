@@ -26,6 +26,10 @@ Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper,
    bit at every period stays within 1e-10 m on the CPU alone (no chaotic transient parts them
    there). Target: within 1e-9 m there.
 
+4. With ``--registers 0,128,96,64``: the flat march compiled for each cap of registers a thread
+   (0: the compiler's choice) at the largest size, with the same bits or not
+   (``kernel.GPU_REGISTERS`` is the one measured best).
+
 Prints one JSON object. With ``NUMBA_ENABLE_CUDASIM=1`` it runs on numba's CUDA simulator
 (slowly: small sizes only), which checks the script, not the GPU.
 """
@@ -91,10 +95,12 @@ def with_transfers(device: str, states: np.ndarray, drive, periods: int) -> dict
             "cpu_s": float(np.median(cpu))}
 
 
-def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat") -> dict:
+def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat", namespace: dict | None = None,
+             keep: bool = False):
     """Start-periods a second of the GPU launch ``name`` alone (``march_flat``, the GPU's, or
-    ``march``, the nested loops): the arrays on the GPU before the clock starts, the launch timed to
-    the device's synchronisation."""
+    ``march``, the nested loops) from ``namespace`` (the kernel's GPU target when None): the arrays
+    on the GPU before the clock starts, the launch timed to the device's synchronisation, after one
+    untimed launch that compiles it. With ``keep``, also the sections of the last march."""
     from numba import cuda
 
     tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
@@ -104,18 +110,42 @@ def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat") 
     host = (True, state, np.zeros(n, bool), np.zeros(n, np.int64)) + tables.arguments() + (
         np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
         np.empty((periods, n)), np.empty((periods, n)))
-    launch = kernel.target("gpu")[name][(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS, kernel.GPU_THREADS]
+    compiled = (namespace or kernel.target("gpu"))[name]
+    launch = compiled[(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS, kernel.GPU_THREADS]
     times = []
-    for _ in range(REPEATS):
+    for k in range(REPEATS + 1):
         args = [cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in host]  # the same start each time
         cuda.synchronize()
         begin = time.perf_counter()
         launch(*args)
         cuda.synchronize()
-        times.append(time.perf_counter() - begin)
+        if k:
+            times.append(time.perf_counter() - begin)
     work = n * periods
-    return {"starts": n, "periods": periods, "wall_s": float(np.median(times)),
-            "start_periods_per_s": work / float(np.median(times)), "best_start_periods_per_s": work / min(times)}
+    row = {"starts": n, "periods": periods, "wall_s": float(np.median(times)),
+           "start_periods_per_s": work / float(np.median(times)), "best_start_periods_per_s": work / min(times)}
+    return (row, args[6].copy_to_host()) if keep else row
+
+
+def register_caps(states: np.ndarray, drive, periods: int, caps: list) -> list:
+    """The GPU's flat march compiled for each cap of registers a thread (0: the compiler's choice):
+    its registers and local memory a thread, start-periods a second (the launch alone), and whether
+    its sections are the first cap's, bit for bit (a cap moves spills, not arithmetic)."""
+    rows, first = [], None
+    for cap in caps:
+        begin = time.perf_counter()
+        namespace = kernel._gpu(cap or None)
+        row, sections = resident(states, drive, periods, namespace=namespace, keep=True)
+        compiled = namespace["march_flat"]
+        row = {"registers_cap": cap or None, "with_compile_s": time.perf_counter() - begin, **row}
+        for key, method in (("registers", "get_regs_per_thread"), ("local_bytes", "get_local_mem_per_thread")):
+            if hasattr(compiled, method):  # not on numba's simulator
+                value = getattr(compiled, method)()
+                row[key] = next(iter(value.values())) if isinstance(value, dict) else value
+        first = sections if first is None else first
+        row["same_bits_as_first"] = bool(np.array_equal(sections, first, equal_nan=True))
+        rows.append(row)
+    return rows
 
 
 def nudged_twin(states: np.ndarray, drive, periods: int) -> dict:
@@ -170,6 +200,8 @@ def main() -> int:
     parser.add_argument("--agree", type=int, default=10_000, help="starts compared with the CPU")
     parser.add_argument("--agree-periods", type=int, default=20)
     parser.add_argument("--cpu-up-to", type=int, default=100_000, help="largest size also marched on the CPU")
+    parser.add_argument("--registers", default="", help="register caps a thread to compare at the largest size, "
+                        "comma-separated (0: the compiler's choice); none by default")
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     import numba
@@ -205,6 +237,9 @@ def main() -> int:
                                    / row["cpu_every_core"]["start_periods_per_s"])
         rows.append(row)
     report["throughput"] = rows
+    if args.registers:
+        caps = [int(c) for c in args.registers.split(",")]
+        report["register_caps"] = register_caps(states[:sizes[-1]], drive, args.periods, caps)
     largest = rows[-1]["gpu_resident"]["start_periods_per_s"]
     report["target"] = {"start_periods_per_s": TARGET, "at_starts": 1_000_000, "largest_size": sizes[-1],
                         "resident_at_largest": largest, "met": sizes[-1] >= 1_000_000 and largest >= TARGET}

@@ -244,7 +244,7 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     row and finds the GPU path's sections equal to the CPU's."""
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT / "src"))
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_gpu.py"), "--sizes", "3,5",
-                             "--periods", "2", "--agree", "4", "--agree-periods", "2"],
+                             "--periods", "2", "--agree", "4", "--agree-periods", "2", "--registers", "0,64"],
                             capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout)
@@ -258,6 +258,9 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     assert agreement["same_onsets_every_period"] == agreement["starts"] == 4
     assert agreement["max_difference_all_m"] <= 1e-12
     assert report["target"]["met"] is False  # 5 starts are not a million
+    caps = report["register_caps"]
+    assert [row["registers_cap"] for row in caps] == [None, 64]
+    assert all(row["same_bits_as_first"] and row["start_periods_per_s"] > 0.0 for row in caps)
 
 
 def test_a_numba_cuda_that_cannot_compile_with_this_numpy_is_named_before_any_march():

@@ -144,12 +144,14 @@ def _separate_gpu(state, failed, groups, offset, scale, delta, drive, c, logs, s
                      tops, bottoms, work)
 
 
-def _gpu() -> dict:
-    from numba import cuda, float64
+def _gpu(registers: int | None = None) -> dict:
+    """The GPU's namespace, its launches compiled for ``registers`` a thread (None: the compiler's
+    choice); :func:`target` gives the one of :data:`GPU_REGISTERS`, ``bench_gpu.py --registers``
+    compares others."""
+    from numba import config, cuda, float64
     device = cuda.jit(device=True)
-    from numba import config
     # numba's CUDA simulator (the tests' GPU) takes no register limit
-    launch = cuda.jit if config.ENABLE_CUDASIM else cuda.jit(max_registers=GPU_REGISTERS)
+    launch = cuda.jit if config.ENABLE_CUDASIM or registers is None else cuda.jit(max_registers=registers)
     namespace = _compiled(device, {"march": (_march_gpu, launch), "march_flat": (_march_flat_gpu, launch),
                                    "separate": (_separate_gpu, launch)})
     namespace.update(cuda=cuda, float64=float64)
@@ -190,7 +192,7 @@ def target(device: str) -> dict:
                 error = gpu_error()
                 if error:
                     raise ValueError(error)
-                _targets[device] = _gpu()
+                _targets[device] = _gpu(GPU_REGISTERS)
             elif device == "cpu":
                 _targets[device] = _cpu()
             else:
