@@ -169,8 +169,12 @@ def gpu_error() -> str | None:
         try:  # what numba-cuda's first compilation imports: it fails there on a numpy it does not know
             import numba.cuda.cudaimpl  # noqa: F401
         except Exception as error:
-            import numba_cuda
-            return (f"device = 'gpu': numba-cuda {getattr(numba_cuda, '__version__', '?')} cannot compile with numpy "
+            from importlib.metadata import PackageNotFoundError, version
+            try:
+                release = version("numba-cuda")
+            except PackageNotFoundError:
+                release = "?"
+            return (f"device = 'gpu': numba-cuda {release} cannot compile with numpy "
                     f"{np.__version__} ({type(error).__name__}: {error}); install a numpy it supports (numba-cuda "
                     f"0.30.4 needs numpy < 2.5) or another numba-cuda; allowed devices here: 'cpu'")
     try:

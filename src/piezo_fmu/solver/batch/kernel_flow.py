@@ -43,7 +43,7 @@ def march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides,
     # the hold step's, the round's and the search's state
     y0 = v = p0 = dp0 = tl = 0.0
     instant = step_onsets = rounds = iterations = 0
-    u = du = w = dw = rem = bound = s = t = g_a = g_b = dg_a = dg_b = tol = t_ev = to = 0.0
+    u = du = w = dw = rem = base = bound = s = t = g_a = g_b = dg_a = dg_b = tol = t_ev = to = 0.0
     held_a = held_b = contact = search_bad = False
     while period < periods:
         end_period = bad
@@ -64,7 +64,7 @@ def march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides,
                 bad = True
             else:
                 rounds += 1
-                u, du, w, dw, rem, _ = round_start(p, dp, q, dq, y0, v, tl, h)
+                u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
                 contact = side != 0.0
                 if contact:
                     now, g_a, dg_a, tol, held_a, bound = contact_start(c, u, du, w, dw, side,
@@ -94,7 +94,7 @@ def march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides,
                 phase = AT_END
         if not bad and phase == AT_END:
             p, dp, q, dq, side, vl, vr, tl, instant, step_onsets, status = round_end(
-                p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, step_onsets, t_ev, to, search_bad, c, work)
+                u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, step_onsets, t_ev, to, search_bad, c, work)
             bad = status == FAILED
             phase = AT_STEP_END if status == DONE else AT_ROUND
         if bad and not end_period:  # failed in this pass: the period ends here, NaN

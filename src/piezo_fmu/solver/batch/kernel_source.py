@@ -42,15 +42,14 @@ def round_start(p, dp, q, dq, y0, v, tl, h):
     return p - base, dp - v, q - base, dq - v, h - tl, base
 
 
-def round_end(p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, to, bad, c, work):
-    """A round's end, given its event search's result ``t_ev`` (s, inf when none within the step),
-    ``to`` (the barrier of an onset) and ``bad``: the trajectory moved to the event or the step's
-    end, the switch rules applied. Returns ``(p, p', q, q', side, vl, vr, tl, instant, onsets,
-    status)``, ``status`` :data:`GOING` (another round), :data:`DONE` (the step's end) or
-    :data:`FAILED` (the state NaN)."""
+def round_end(u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, onsets, t_ev, to, bad, c, work):
+    """A round's end, from its start (:func:`round_start`'s values) and its event search's result
+    ``t_ev`` (s, inf when none within the step), ``to`` (the barrier of an onset) and ``bad``: the
+    trajectory moved to the event or the step's end, the switch rules applied. Returns ``(p, p', q,
+    q', side, vl, vr, tl, instant, onsets, status)``, ``status`` :data:`GOING` (another round),
+    :data:`DONE` (the step's end) or :data:`FAILED` (the state NaN)."""
     hg = c[HG]
     coupled = c[COUPLED] != 0.0
-    u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
     free = side == 0.0
     dt = fmin(t_ev, rem)
     switch = t_ev <= rem and not bad
@@ -107,14 +106,14 @@ def event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work):
     instant = 0
     onsets = 0
     for _ in range(MAX_ROUNDS):
-        u, du, w, dw, rem, _ = round_start(p, dp, q, dq, y0, v, tl, h)
+        u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
         to = 0.0
         if side == 0.0:
             t_ev, to, bad = free_event(c, work, u, du, w, dw, rem)
         else:
             t_ev, bad = contact_event(c, u, du, w, dw, side, contact_voltage(side, vl, vr, c), rem, work)
         p, dp, q, dq, side, vl, vr, tl, instant, onsets, status = round_end(
-            p, dp, q, dq, side, vl, vr, y0, v, h, tl, instant, onsets, t_ev, to, bad, c, work)
+            u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, onsets, t_ev, to, bad, c, work)
         if status == FAILED:
             return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True
         if status == DONE:
