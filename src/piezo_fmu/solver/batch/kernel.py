@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import kernel_books as books
 from . import kernel_flow as flow
 from . import kernel_phases as physics
 from . import kernel_source as source
@@ -107,14 +108,16 @@ def _separate_cpu(state, failed, groups, offset, scale, delta, drive, c, logs, s
 def _cpu() -> dict:
     import numba
     from . import kernel_cache
-    kernel_cache.install((physics.__file__, source.__file__, flow.__file__, __file__), cache_dir())
+    kernel_cache.install((physics.__file__, source.__file__, flow.__file__, books.__file__, __file__), cache_dir())
     # The inner functions touch no reference-counted object: without numba's runtime (``_nrt``)
     # their array arguments are not counted at every call, which cost more than the physics.
     options = dict(cache=True, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
     jit, inline = numba.njit(**options), numba.njit(inline="always", **options)
     parallel = numba.njit(cache=True, parallel=True, error_model="numpy")
+    serial = numba.njit(cache=True, error_model="numpy")
     drivers = {"march": (_march_cpu, parallel), "march_flat": (_march_flat_cpu, parallel),
-               "separate": (_separate_cpu, parallel)}
+               "separate": (_separate_cpu, parallel), "largest4": (books.largest4, inline),
+               "shrinking_returns": (books.shrinking_returns, serial), "orbit_distances": (books.orbit_distances, serial)}
     namespace = _compiled(jit, drivers, inline)
     namespace.update(np=np, prange=numba.prange)
     return namespace

@@ -5,11 +5,11 @@ numba keys a cached function by its source file's content (a SHA-256 stamp) and 
 puts it in a folder named after the file's directory. A host process that loaded an FMU imports
 ``piezo_fmu`` from that FMU's unpacked copy, in a fresh temporary folder each time, and would
 compile the kernel anew in every such process (tens of seconds). This locator puts the compiled
-code of the kernel (:mod:`.kernel_phases`, :mod:`.kernel_source` and the drivers of
-:mod:`.kernel`), from wherever it was imported, in one folder, so every copy with the same content
-finds it.
+code of the kernel (:mod:`.kernel_phases`, :mod:`.kernel_source`, :mod:`.kernel_flow`,
+:mod:`.kernel_books` and the drivers of :mod:`.kernel`), from wherever it was imported, in one
+folder, so every copy with the same content finds it.
 
-**The folder is named by the content of all three files** (their SHA-256), not only each file's
+**The folder is named by the content of all the kernel's files** (their SHA-256), not only each file's
 own: a function's compiled code holds the functions it calls, and :mod:`.kernel` decides how they
 are compiled (which are inlined into their callers). In one folder for every version, a caller
 compiled under one version's :data:`.kernel.INLINE` stayed valid for another (its own file had not

@@ -264,10 +264,16 @@ def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marc
 
 def _distances(history, scale, orbit: Orbit) -> tuple[np.ndarray, np.ndarray]:
     """Scaled distance of each section (periods, m) to the nearest point of ``orbit``, and that
-    point's index."""
+    point's index (compiled: :func:`.kernel_books.orbit_distances`)."""
     points = orbit.sections * scale
-    gaps = np.abs(history["sections"][:, :, None, :] * scale - points[None, None]).max(axis=3)
-    return gaps.min(axis=2), gaps.argmin(axis=2)
+    return _books()["orbit_distances"](np.ascontiguousarray(history["sections"], float),
+                                       np.ascontiguousarray(scale, float), np.ascontiguousarray(points, float))
+
+
+def _books() -> dict:
+    """The compiled bookkeeping (:mod:`.kernel_books`), from the kernel's CPU namespace."""
+    from . import kernel
+    return kernel.target("cpu")
 
 
 def _label_orbits(state, history, ids, groups, scales, tolerance, marched) -> None:
@@ -307,13 +313,11 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
     most = min(settings.max_order, (span - 2) // 3)  # the orders 1 to most
     if most < 1:
         return
-    scale = scales[groups]
-    size = np.abs(sections[-1] * scale).max(axis=1)
     # the return over each order at the history's start and at its end, all orders at once (row
-    # k is the order k + 1: sections[1:] and, backwards from the last but one, sections[span - 2::-1])
-    first = np.abs((sections[1:most + 1] - sections[0]) * scale).max(axis=2)
-    last = np.abs((sections[-1] - sections[span - 2::-1][:most]) * scale).max(axis=2)
-    shrinking = open_ & (last < 0.5 * first) & (last <= SEED_REACH * size)
+    # k is the order k + 1: sections[1:] and, backwards from the last but one, sections[span - 2::-1]),
+    # compiled (:func:`.kernel_books.shrinking_returns`)
+    shrinking = _books()["shrinking_returns"](np.ascontiguousarray(sections, float),
+                                              np.ascontiguousarray(scales[groups], float), open_, most, SEED_REACH)
     rows = np.flatnonzero(shrinking.any(axis=1))
     if not rows.size:
         return
