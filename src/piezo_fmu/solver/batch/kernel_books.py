@@ -13,16 +13,12 @@ smallest), so they give numpy's answers bit for bit. They are compiled with the 
 cache (:mod:`.kernel`), for the CPU only: the history is kept on the host.
 """
 
-import math
-
-NAN = math.nan
+from .kernel_phases import NAN, fmax
 
 
 def largest4(a, b, c, d):
-    """numpy's ``max`` of four values: NaN when any is."""
-    if a != a or b != b or c != c or d != d:
-        return NAN
-    return max(max(a, b), max(c, d))
+    """numpy's ``max`` of four values: NaN when any is (the kernel's :func:`.kernel_phases.fmax`)."""
+    return fmax(fmax(a, b), fmax(c, d))
 
 
 def shrinking_returns(sections, scale, open_, most, reach):
