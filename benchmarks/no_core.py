@@ -1,7 +1,7 @@
 """The co-simulation of the benchmarks' floor FMUs: values read and written as the piezo FMUs do,
 but no core and no steps (see ``null_slave.py`` and ``null_slave3.py``)."""
 
-from piezo_fmu.fmi.cosim import CoSimulation
+from piezo_fmu.fmi.cosim import ALL, CoSimulation
 
 
 class NoCore(CoSimulation):
@@ -10,5 +10,5 @@ class NoCore(CoSimulation):
     def step(self, current_time: float, step_size: float) -> bool:
         return True
 
-    def _update(self) -> None:
-        self._current = True
+    def _update(self, level: int) -> None:
+        self._fresh = ALL

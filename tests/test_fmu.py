@@ -11,6 +11,7 @@ import itertools
 import json
 import math
 import os
+import random
 import subprocess
 import sys
 import sysconfig
@@ -27,6 +28,7 @@ from fmpy.logging import addLoggerProxy
 from piezo_fmu import Parameters, Simulator, parameter_info
 from piezo_fmu.build import fmus as fmu_build
 from piezo_fmu.fmi.variables import OUTPUTS
+from piezo_fmu.solver import ENERGY_READINGS
 from fmu_host import read_outputs, set_values
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -252,6 +254,49 @@ def test_harvested_energy_per_barrier_adds_up_to_the_total(unzipdir, model_descr
     assert final["harvested_energy_left"] + final["harvested_energy_right"] == \
         pytest.approx(final["harvested_energy"], rel=1e-14)
     assert_outputs_close(final, expected, rtol=1e-12)
+
+
+def test_any_outputs_read_at_any_step_have_the_bits_of_a_host_that_reads_every_output(unzipdir, model_description):
+    """Which outputs a host reads after a step changes nothing it reads: each value is, to the bit,
+    the one a host that reads every output gets, the energy ledger's included (an instant at which
+    none of those is read is spared their quadratures, and the ledger still books as a full read
+    would). Both hosts read after every step (the ledger's rounding follows the instants a host reads
+    at, ``Ledger.book_pending``). Under the harness's first-order hold at 1.25 w_n: impacts every
+    period, a new bracket every step, the circuits harvesting."""
+    values = {"voltage_model": 1, "R_load": 3.6e6}
+    omega, n, amplitude = 1.25 * math.sqrt(1000.0), 64, 1e-3
+    h = 2.0 * math.pi / omega / n
+    nodes = [amplitude * math.sin(2.0 * math.pi * k / n) for k in range(n + 1)]
+    hold = [(nodes[k], (nodes[k + 1] - nodes[k]) / h) for k in range(n)]
+    inputs = {"base_displacement": hold[0][0], "base_velocity": hold[0][1]}
+    every, some = (Host(unzipdir, model_description, start_values=values, inputs=inputs) for _ in range(2))
+    variables = every.variables
+    outputs = [name for name, v in variables.items() if v.causality == "output"]
+    energy = [name for name in outputs if name in ENERGY_READINGS]
+    motion = [name for name in outputs if name not in ENERGY_READINGS]
+    assert len(energy) == 5 and len(motion) == len(outputs) - 5
+    rng = random.Random(3)
+    reads = {"motion": 0, "energy": 0}
+    try:
+        for step in range(8 * n):
+            y, v = hold[step % n]
+            for host in (every, some):
+                host.set(base_displacement=y, base_velocity=v)
+                host.step(h)
+            expected = every.outputs()
+            kind = rng.choices(list(reads), weights=(4, 1))[0]
+            reads[kind] += 1
+            chosen = rng.sample(motion, 2) + (rng.sample(energy, 1) if kind == "energy" else [])
+            for name in chosen:
+                var = variables[name]
+                getter = some.fmu.getInteger if var.type == "Integer" else some.fmu.getReal
+                value = getter([var.valueReference])[0]
+                assert float(value).hex() == float(expected[name]).hex(), (step, name, value, expected[name])
+        assert expected["impact_count"] >= 8 and expected["harvested_energy"] > 0
+        assert min(reads.values()) > 80
+    finally:
+        every.close()
+        some.close()
 
 
 def test_nominal_case_through_fmpy_equals_the_core():

@@ -16,7 +16,7 @@ from math import isfinite
 from typing import Callable, Optional
 
 from piezo_fmu import Parameters, Simulator, parameter_info
-from piezo_fmu.solver import READINGS
+from piezo_fmu.solver import ENERGY_READINGS, READINGS
 from piezo_fmu.fmi.variables import BY_NAME, VARIABLES
 
 
@@ -44,6 +44,14 @@ def _runs(outputs) -> tuple:
 _RUNS = _runs(_BY_CAUSALITY["output"])
 #: The outputs that are 0 while the core's reading is NaN (a metric not defined yet).
 _UNDEFINED_IS_ZERO = tuple(vr for vr in _BY_CAUSALITY["output"] if VARIABLES[vr].undefined_is_zero)
+#: The outputs of the energy ledger's quadratures, and what a read of none of them brings up to date
+#: (the core's ``reading_values(energy=False)``): the other outputs, and the calculated parameters.
+_ENERGY = frozenset(BY_NAME[name] for name in ENERGY_READINGS)
+_MOTION_RUNS = _runs(vr for vr in _BY_CAUSALITY["output"] if vr not in _ENERGY)
+_MOTION_UNDEFINED_IS_ZERO = tuple(vr for vr in _UNDEFINED_IS_ZERO if vr not in _ENERGY)
+#: How much of the outputs in ``CoSimulation.now`` is of the present instant: none, all but the
+#: energy ledger's, or all.
+STALE, MOTION, ALL = range(3)
 _Y, _V = BY_NAME["base_displacement"], BY_NAME["base_velocity"]
 #: The variables whose values come from the core: reading one brings them up to date.
 _FROM_CORE = frozenset(_BY_CAUSALITY["output"] + _BY_CAUSALITY["calculatedParameter"])
@@ -84,13 +92,15 @@ def _allowed_ranges() -> dict:
 _ALLOWED = _allowed_ranges()
 
 
-def publish(now: list, readings) -> None:
+def publish(now: list, readings, energy: bool = True) -> None:
     """Write ``readings`` (values in the order of :data:`piezo_fmu.solver.READINGS`) into the outputs
     of ``now`` (values by value reference): each output is the reading of its name, 0 where it is
-    undefined (NaN) and the table says so. Every interface serves its outputs through this."""
-    for first, end, begin, stop in _RUNS:
+    undefined (NaN) and the table says so; with ``energy`` False, all but the outputs of
+    :data:`piezo_fmu.solver.ENERGY_READINGS` (left as they were). Every interface serves its
+    outputs through this."""
+    for first, end, begin, stop in _RUNS if energy else _MOTION_RUNS:
         now[first:end] = readings[begin:stop]
-    for vr in _UNDEFINED_IS_ZERO:
+    for vr in _UNDEFINED_IS_ZERO if energy else _MOTION_UNDEFINED_IS_ZERO:
         if now[vr] != now[vr]:
             now[vr] = 0.0
 
@@ -141,7 +151,7 @@ class CoSimulation:
         #: up to date (``_update``) when read.
         self.now = [spec.start if spec.start is not None else 0 if spec.type == "Integer" else math.nan
                     for spec in VARIABLES]
-        self._current = False  # the outputs in ``now`` are those of the present instant
+        self._fresh = STALE  # how much of the outputs in ``now`` is of the present instant
         self._start_time = 0.0
         self._sim: Optional[Simulator] = None
         self._stale = True  # start values changed since the core was built
@@ -150,9 +160,14 @@ class CoSimulation:
         self._fault: Optional[str] = None  # why every further step must fail
 
     def get(self, vrs) -> list:
-        """The values of the variables ``vrs`` (value references, already checked for their type)."""
-        if not self._current and not _FROM_CORE.isdisjoint(vrs):
-            self._update()
+        """The values of the variables ``vrs`` (value references, already checked for their type).
+        The energy ledger's outputs are brought up to date only when some of them are read (the
+        values are the same either way: ``Simulator.reading_values``)."""
+        if self._fresh != ALL and not _FROM_CORE.isdisjoint(vrs):
+            if not _ENERGY.isdisjoint(vrs):
+                self._update(ALL)
+            elif self._fresh == STALE:
+                self._update(MOTION)
         now = self.now
         return [now[vr] for vr in vrs]
 
@@ -185,18 +200,21 @@ class CoSimulation:
         self._start_values_changed()
 
     def _start_values_changed(self) -> None:
-        self._stale, self._current = True, False
+        self._stale, self._fresh = True, STALE
 
-    def _update(self) -> None:
-        """Bring the outputs (and, with a new core, the calculated parameters) in ``now`` up to date."""
+    def _update(self, level: int) -> None:
+        """Bring the outputs (and, with a new core, the calculated parameters) in ``now`` up to date:
+        all of them (``level`` :data:`ALL`) or all but the energy ledger's (:data:`MOTION`)."""
         sim = self._sim if self._stepping or not self._stale else self._core()
         now = self.now
         if sim is None:
             for vr, value in _NO_CORE:
                 now[vr] = value
+            level = ALL
         else:
-            publish(now, sim.reading_values())
-        self._current = True
+            energy = level == ALL
+            publish(now, sim.reading_values(energy), energy)
+        self._fresh = level
 
     # -- life cycle -------------------------------------------------------------------------------
 
@@ -211,7 +229,7 @@ class CoSimulation:
     def _core(self) -> Optional[Simulator]:
         """The core at the present time; before stepping, rebuilt from the start values set."""
         if self._stale and not self._stepping:
-            self._stale, self._current = False, False
+            self._stale, self._fresh = False, STALE
             self._sim, self._fault = None, self._bad_inputs()
             if self._fault is not None:
                 return None
@@ -286,7 +304,7 @@ class CoSimulation:
         y, v = now[_Y], now[_V]
         if not (isfinite(y) and isfinite(v)):
             return self._fail(f"step from t = {current_time!r} s refused: {self._bad_inputs()}")
-        self._current = False
+        self._fresh = STALE
         try:
             sim.advance(_step_end(t, current_time, step_size), y, v)
         except Exception as error:  # noqa: BLE001 - reported through FMI, never raised
@@ -323,7 +341,7 @@ class CoSimulation:
         for name, value in {**state["values"], **state["inputs"]}.items():
             self.now[BY_NAME[name]] = value
         self._start_time, self._stepping = state["start_time"], state["stepping"]
-        self._fault, self._sim, self._stale, self._current = state["fault"], None, True, False
+        self._fault, self._sim, self._stale, self._fresh = state["fault"], None, True, STALE
         if state["core"] is not None:
             self._sim = Simulator.restore(Parameters(**self._parameters()), state["core"], log_limit=0)
             self._stale = False

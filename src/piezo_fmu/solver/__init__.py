@@ -13,6 +13,6 @@
 from .ledger import EnergyLedger
 from .metrics import Metrics, perfectibility
 from .records import Impact, State
-from .simulator import READINGS, Simulator
+from .simulator import ENERGY_READINGS, READINGS, Simulator
 
-__all__ = ["EnergyLedger", "Impact", "Metrics", "READINGS", "Simulator", "State", "perfectibility"]
+__all__ = ["ENERGY_READINGS", "EnergyLedger", "Impact", "Metrics", "READINGS", "Simulator", "State", "perfectibility"]

@@ -7,6 +7,8 @@ maxima, the metrics and the energy ledger) and saving and restoring the full sta
 
 from __future__ import annotations
 
+import math
+
 from ..model.dynamics import FREE, LEFT, RIGHT
 from ..model.parameters import Parameters
 from ..model.voltage import quasi_static
@@ -23,6 +25,10 @@ READINGS = ("main_displacement", "main_velocity", "impactor_displacement", "impa
             "voltage_rms", "average_power", "damping_inclination", "energy_dissipated", "energy_balance_error",
             "harvested_energy", "power_left", "power_right", "harvested_energy_left", "harvested_energy_right",
             "damping_inclination_ls")
+#: The readings of the energy ledger's quadratures: an instant at which a host reads none of them
+#: is spared their cost (:meth:`Simulator.reading_values` with ``energy=False``).
+ENERGY_READINGS = ("energy_dissipated", "energy_balance_error", "harvested_energy", "harvested_energy_left",
+                   "harvested_energy_right")
 
 
 class Simulator(Integrator):
@@ -95,13 +101,16 @@ class Simulator(Integrator):
         are these."""
         return dict(zip(READINGS, self.reading_values()))
 
-    def reading_values(self) -> tuple:
+    def reading_values(self, energy: bool = True) -> tuple:
         """The values of :meth:`readings`, in the order of :data:`READINGS` (what a host that reads
-        them all at every step calls)."""
+        them all at every step calls). With ``energy`` False the readings of
+        :data:`ENERGY_READINGS` are NaN and not computed (a host that reads none of them now); the
+        ledger still books what a full reading would, so that its totals, read later, are the
+        same to the bit whichever outputs a host read before."""
         side = self._side
         deflection = self.deflection(side) if side else 0.0
         left, right = (deflection, 0.0) if side == LEFT else (0.0, deflection)
-        metrics, energy = self.metrics, self._energy_values()
+        metrics = self.metrics
         if self._circuit is None:
             # The quasi-static voltage of the barrier in contact; the other one's is 0.
             v = quasi_static(self.barrier.k_V, deflection)
@@ -111,10 +120,17 @@ class Simulator(Integrator):
             v_left, v_right = self._circuit_now(LEFT)[0], self._circuit_now(RIGHT)[0]
             R = self.params.R_load
             power_left, power_right = v_left * v_left / R, v_right * v_right / R
-        dissipated, balance_error, harvested = ledger_totals(*energy)
+        if energy:
+            values = self._energy_values()
+            dissipated, balance_error, harvested = ledger_totals(*values)
+            harvested_left, harvested_right = values[9], values[10]
+        else:
+            self._ledger.book_pending()
+            dissipated = balance_error = harvested = harvested_left = harvested_right = math.nan
         return (self._p, self._dp, self._q, self._dq, left, right, v_left, v_right, self.base_force,
                 metrics.impact_count, metrics.last_impact_voltage, metrics.V_rms, metrics.P_ave, metrics.DI,
-                dissipated, balance_error, harvested, power_left, power_right, energy[9], energy[10], metrics.DI_ls)
+                dissipated, balance_error, harvested, power_left, power_right, harvested_left, harvested_right,
+                metrics.DI_ls)
 
     @property
     def impacts(self) -> list[Impact]:
