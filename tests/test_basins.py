@@ -71,7 +71,7 @@ def test_issue_26s_start_ends_on_the_two_impact_orbit_as_the_fmu_marched_alone_s
     attractor = label_of(basins, summary, ISSUE_START)
     assert (attractor["kind"], attractor["order"], attractor["impacts"]) == ("orbit", 1, [2])
     assert attractor["amplitude"] == pytest.approx(1.00e-3, rel=5e-3)
-    run = marcher.march(values_of(basins), W, Y, (p0, dp0, p0, 0.0), 500)
+    run = marcher.march(values_of(basins), W, Y, (p0, dp0, p0, 0.0), 500, trace=True)
     assert (run["onsets"][-100:] == 2).all()  # it impacts twice in every period
     assert reaches(run, attractor, W)
     assert 0.5 * (run["top"][-1] - run["bottom"][-1]) == pytest.approx(attractor["amplitude"], rel=5e-3)
