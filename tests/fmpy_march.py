@@ -53,8 +53,8 @@ class Marcher:
         ``bottom``), and ``p`` and ``p'`` after every step, the start first (``p``, ``dp``), ``h`` s
         apart. Without it the FMU is read only at the period's end: what it reads there is the same
         to the bit (``test_fmu``: which outputs a host reads, and when, changes no motion it reads),
-        and a long march is about a third faster (the step's readings are most of a step's work
-        beside the step itself)."""
+        and a long march is about a third faster (a reading goes through fmpy and books the FMU's
+        energy ledger: about a third of a step's cost under the moving base)."""
         if self.started:
             self.fmu.reset()
         self.started = True
