@@ -48,7 +48,6 @@ _UNDEFINED_IS_ZERO = tuple(vr for vr in _BY_CAUSALITY["output"] if VARIABLES[vr]
 #: (the core's ``reading_values(energy=False)``): the other outputs, and the calculated parameters.
 _ENERGY = frozenset(BY_NAME[name] for name in ENERGY_READINGS)
 _MOTION_RUNS = _runs(vr for vr in _BY_CAUSALITY["output"] if vr not in _ENERGY)
-_MOTION_UNDEFINED_IS_ZERO = tuple(vr for vr in _UNDEFINED_IS_ZERO if vr not in _ENERGY)
 #: How much of the outputs in ``CoSimulation.now`` is of the present instant: none, all but the
 #: energy ledger's, or all.
 STALE, MOTION, ALL = range(3)
@@ -96,11 +95,12 @@ def publish(now: list, readings, energy: bool = True) -> None:
     """Write ``readings`` (values in the order of :data:`piezo_fmu.solver.READINGS`) into the outputs
     of ``now`` (values by value reference): each output is the reading of its name, 0 where it is
     undefined (NaN) and the table says so; with ``energy`` False, all but the outputs of
-    :data:`piezo_fmu.solver.ENERGY_READINGS` (left as they were). Every interface serves its
-    outputs through this."""
+    :data:`piezo_fmu.solver.ENERGY_READINGS` (left as they were, not current: a read of one of
+    them publishes them all first, ``CoSimulation.get``). Every interface serves its outputs
+    through this."""
     for first, end, begin, stop in _RUNS if energy else _MOTION_RUNS:
         now[first:end] = readings[begin:stop]
-    for vr in _UNDEFINED_IS_ZERO if energy else _MOTION_UNDEFINED_IS_ZERO:
+    for vr in _UNDEFINED_IS_ZERO:
         if now[vr] != now[vr]:
             now[vr] = 0.0
 
