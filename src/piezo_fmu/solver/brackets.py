@@ -6,7 +6,8 @@ computes, in one matrix product from its start state, the Taylor coefficients of
 power and Bernstein coefficients of the phase's event functions
 (:func:`piezo_fmu.model.dynamics.event_functionals`) and the rates of the energy ledger
 (:func:`piezo_fmu.model.energy.energy_rates`); then it locates the phase switch (the first
-terminal event) and the non-terminal events before it (``roots.py``).
+terminal event) and the non-terminal events before it (``roots.py``). In free flight those
+searches are put off until a move may reach a root (:class:`Deferred`), with the same results.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from ..model.dynamics import DU, DW, FREE, LEFT, RIGHT, approach_sign, mirror_signs
 from .propagation import POWERS_AT_START, STATE_TERMS, LinearPhase
-from .roots import _TO_BERNSTEIN, crossings
+from .roots import _TO_BERNSTEIN, NEWTON_LAST, crossings
 
 #: Non-terminal events: a maximum of ``p``, a peak of ``delta``, a peak of the circuit's ``|V|``.
 MAXIMUM, PEAK, VOLTAGE_PEAK = 0, 1, 2
@@ -30,6 +31,13 @@ NOISE_ULPS = 64
 #: squares, in the ledger, stay inside double range.
 STATE_LIMIT = 1e150
 EPS = float(np.finfo(float).eps)
+#: Put off the root searches of free flight until a move may reach a root (:class:`Deferred`);
+#: False locates every root when the bracket opens (the same roots: the tests compare both).
+DEFER = True
+#: How far (normalised time) beyond a move's end a put-off search is shown to have no root before
+#: the move goes on without it: more than any last Newton step of the refinement (``NEWTON_LAST``).
+DEFER_MARGIN = 2.0**-20
+assert DEFER_MARGIN > NEWTON_LAST
 
 
 @dataclass(slots=True)
@@ -58,9 +66,22 @@ class Bracket:
     ledger: np.ndarray | None = None
     #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
     powers: np.ndarray = field(default_factory=lambda: POWERS_AT_START)
+    #: The root searches put off (free flight, :class:`Deferred`); None once they have run: then
+    #: ``s_switch``, ``switch_to`` and ``events`` are final.
+    deferred: "Deferred | None" = None
+
+    def located_to(self, s: float) -> None:
+        """Make ``s_switch``, ``switch_to`` and the events up to ``s`` those of the searches run
+        when the bracket opened: run the put-off searches unless none has a root up to ``s``."""
+        deferred = self.deferred
+        if deferred is not None and s > deferred.until and not deferred.clear_until(s):
+            deferred.run(self)
 
     def to_dict(self) -> dict:
+        if self.deferred is not None:
+            self.deferred.run(self)  # a snapshot holds the bracket as it was always held
         data = asdict(self)
+        del data["deferred"]
         for name in ("c", "delta", "rates", "ledger", "powers"):
             value = getattr(self, name)
             data[name] = None if value is None else value.tolist()
@@ -75,6 +96,91 @@ class Bracket:
                 data[name] = np.array(data[name], dtype=float)
         data["events"] = [(float(s), int(k)) for s, k in data["events"]]
         return cls(**data)
+
+
+class Deferred:
+    """The root searches of a free-flight bracket, put off until a move may reach one of their roots.
+
+    A free-flight bracket is ``THETA`` radians of the motion long, often many communication steps;
+    when the base moves, each step opens a new bracket and uses only its start. Its searches (the
+    contact onsets, the maxima of ``p``) are therefore run only when a move may reach a root: the
+    integrator asks :meth:`clear_until` before each move, and a search that cannot have a root up to
+    the move's end is skipped. When one may, all of them run (:meth:`run`) exactly as they would
+    have when the bracket opened: the same functions, the same numbers, so the same roots, switch
+    and events, to the bit.
+
+    **Why a skipped search has no root there.** Let ``a`` be the polynomial a search refines (power
+    coefficients), ``A = sum |a_k|``. On ``[0, s]`` it keeps the sign of ``a_0``, by at least
+    ``|a_0| - sum_{k>=1} |a_k| s^k``. When that exceeds ``1e-6 A + 8 noise`` for ``s``
+    :data:`DEFER_MARGIN` beyond the move's end, no root the search can report lies in the move:
+
+    - the search (``roots.crossings``) refines a root only on an interval whose first Bernstein
+      coefficient has the sign before the crossing and whose last has the sign after it, and it
+      reports the end of an interval only where the last coefficient is zero within ``noise``. The
+      end coefficients are the values at the ends, to the rounding of the coefficients and of
+      their halving (below ``1e-12 A`` and a few ``noise``): so an interval that starts in ``[0, s]``
+      with the sign after the crossing is not refined, and none ends there with a zero;
+    - an interval that starts with the sign before it is refined from the left: every point the
+      refinement tries in ``[0, s]`` reads that sign (Horner's rounding is below ``1e-14 A``), and
+      it stops only at a point that reads zero, or where its bracket of signs has closed (on a
+      point that read the other sign), or within ``NEWTON_LAST`` of a point where the value is at
+      most ``NEWTON_LAST`` times the slope (``<= ORDER A``): none of these lies in ``[0, s]``.
+    """
+
+    __slots__ = ("terminal", "maxima", "clear", "until", "fail")
+
+    def __init__(self):
+        #: The contact onsets' searches: ``(target, g, b, noise, row)``, in the opener's order.
+        self.terminal: list = []
+        #: The maxima of ``p``'s search ``(g, b, noise, row)`` (``_fall_search``), or None.
+        self.maxima: tuple | None = None
+        #: Normalised time up to which no search has a root (shown so far), and the furthest end
+        #: of a move that this covers (``clear - DEFER_MARGIN``): a move that ends there needs no test.
+        self.clear = 0.0
+        self.until = -DEFER_MARGIN
+        #: The shortest span whose test failed (1: the bracket's end, never shown clear).
+        self.fail = 1.0
+
+    def clear_until(self, s_stop: float) -> bool:
+        """Whether no search has a root in ``(0, s_stop]``, shown as in the class's text. A bracket
+        that many short moves use is shown clear ahead of them: each test also tries twice the span
+        shown so far (no further than halfway to the shortest span that failed), so a few tests
+        cover all its moves."""
+        s = s_stop + DEFER_MARGIN
+        if s <= self.clear:
+            return True
+        if s >= self.fail:
+            return False
+        ahead = min(2.0 * self.clear, 0.5 * (self.clear + self.fail))
+        for trial in ((ahead, s) if s < ahead else (s,)):
+            if all(_clear(g.tolist(), noise, trial) for _, g, _, noise, _ in self.terminal) and (
+                    self.maxima is None or _clear(self.maxima[0].tolist(), self.maxima[2], trial)):
+                self.clear, self.until = trial, trial - DEFER_MARGIN
+                return True
+            self.fail = trial
+        return False
+
+    def run(self, br: "Bracket") -> None:
+        """Run the searches as the opener would have: the switch, then the maxima before it."""
+        for target, g, b, noise, row in self.terminal:
+            roots = crossings(g, +1, b, noise, row)
+            if roots and roots[0] < br.s_switch:
+                br.s_switch, br.switch_to = roots[0], target
+        if self.maxima is not None:
+            br.events = [(s, MAXIMUM) for s in crossings(self.maxima[0], -1, *self.maxima[1:]) if s <= br.s_switch]
+        br.deferred = None
+
+
+def _clear(a: list[float], noise: float, s: float) -> bool:
+    """Whether the polynomial ``a`` (power coefficients, normalised time) keeps the sign of its
+    start on ``[0, s]`` so clearly that no search could report a crossing there (:class:`Deferred`)."""
+    reach = total = 0.0
+    for coefficient in reversed(a[1:]):
+        size = abs(coefficient)
+        reach = reach * s + size
+        total += size
+    start = abs(a[0])
+    return start - reach * s * (1.0 + 1e-12) > 1e-6 * (total + start) + 8.0 * noise
 
 
 class BracketMaps:
@@ -149,7 +255,8 @@ class BracketOpener:
     def open(self, side: int, xs: list[float], t: float, y: float, v: float) -> Bracket:
         """A new bracket of phase ``side`` from the deviation state ``xs`` at time ``t`` (s), with
         the base at ``y`` (m) moving at ``v`` (m/s), with its switch and its events on it located
-        (all but the circuit's voltage peaks). Raises :class:`StateOverflow`."""
+        (all but the circuit's voltage peaks; in free flight put off, :attr:`Bracket.deferred`).
+        Raises :class:`StateOverflow`."""
         maps = self.maps[side]
         phase = maps.phase
         sizes = list(map(abs, xs))
@@ -173,6 +280,7 @@ class BracketOpener:
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
         values = B.tolist()
+        deferred = Deferred() if DEFER and side == FREE else None
         for j in range(n_terminal):
             g, b, row = G[j], B[j], values[j]
             start_value = row[0]  # the first Bernstein coefficient is the value at the start
@@ -206,9 +314,17 @@ class BracketOpener:
                 g[0] = 0.0
                 b = b - start_value
                 row = [value - start_value for value in row]
+            if deferred is not None:
+                deferred.terminal.append((targets[j], g, b, noise, row))
+                continue
             roots = crossings(g, direction, b, noise, row)
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], targets[j]
+        if deferred is not None:
+            deferred.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
+            if deferred.terminal or deferred.maxima:
+                br.deferred = deferred
+            return br
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
         events = [(s, MAXIMUM) for s in _falls(G, B, values, 2, sizes, noise_rows, v) if s <= br.s_switch]
         if side != FREE:
@@ -219,12 +335,20 @@ class BracketOpener:
         return br
 
 
+def _fall_search(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
+                 v: float) -> tuple | None:
+    """What :func:`_falls` searches: ``(g, b, noise, row)``, or None when the function keeps one
+    strict sign on the bracket."""
+    row = values[j]
+    if min(row) > 0.0 or max(row) < 0.0:
+        return None
+    noise = rounding(noise_rows[j], sizes) + (NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
+    return G[j], B[j], noise, row
+
+
 def _falls(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
            v: float) -> list[float]:
     """Where event function ``j`` falls through zero: maxima of ``p`` (j = 2, where the base
     velocity adds to the rounding level) and peaks of ``delta`` (j = 1, in contact)."""
-    row = values[j]
-    if min(row) > 0.0 or max(row) < 0.0:
-        return []
-    noise = rounding(noise_rows[j], sizes) + (NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
-    return crossings(G[j], -1, B[j], noise, row)
+    search = _fall_search(G, B, values, j, sizes, noise_rows, v)
+    return [] if search is None else crossings(search[0], -1, *search[1:])

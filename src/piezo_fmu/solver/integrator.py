@@ -125,6 +125,8 @@ class Integrator:
             s_stop = (t_end - br.t_start) / br.tau
             if s_stop > 1.0:
                 s_stop = 1.0
+            if br.deferred is not None and s_stop > br.deferred.until:
+                br.located_to(s_stop)  # the searches put off, run if this move may meet a root
             s_to = s_stop if s_stop < br.s_switch else br.s_switch
             while br.events and br.events[0][0] <= s_to:
                 self._non_terminal_event(br, *br.events.pop(0))
