@@ -6,6 +6,10 @@ Run: ``.venv/bin/python benchmarks/bench_core.py``. See ``benchmarks/README.md``
 another commit, e.g. ``git worktree add /tmp/before <commit>``, then ``--baseline /tmp/before/src``)
 beside this tree's, both in child processes, interleaved, best of ``CORE_REPEATS`` each: how a
 change of the core's code moved its speed, measured side by side in one run.
+
+Last, the core's step under the harness's first-order hold (a new bracket every step) with free
+flight's root searches put off until a move may reach a root (``brackets.DEFER``, the default)
+against located when each bracket opens, alternated in this process, the same bits checked.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from exact_reference import exact_run  # noqa: E402
 from reference import DEFAULT_ATOL, DEFAULT_RTOL, reference_run  # noqa: E402
 
 from piezo_fmu import Parameters, Simulator  # noqa: E402
+from piezo_fmu.solver import brackets  # noqa: E402
 
 T_END = 2.0
 CORE_REPEATS = 20
@@ -33,6 +38,8 @@ REF_REPEATS = 5
 TIGHTEST_RTOL = 2.3e-14  # just above scipy's floor for RK solvers (100 eps = 2.22e-14)
 TIGHTEST_RTOL = 2.3e-14  # just above scipy's floor for RK solvers (100 eps = 2.2e-14)
 LOOSE_RTOL = 1e-12  # the loosest setting one might call "high accuracy" with DOP853
+#: The harness's hold: forcing frequencies (w / w_n), periods from rest, alternations of the two ways.
+HOLD_RATIOS, HOLD_PERIODS, HOLD_ROUNDS = (1.25, 0.95), 20, 8
 
 
 def best_of(fn, repeats):
@@ -106,6 +113,38 @@ def compare_trees(baseline: str, rounds: int = 3) -> None:
           f"{best['this tree'][1] / best['baseline'][1]:.3f} (CPU)")
 
 
+def hold_run(ratio: float, samples: int = 64) -> tuple:
+    """The circuit damper under the harness's hold (1 mm, ``samples`` steps a period) from rest at
+    ``p = q = 1 mm``: CPU seconds a step, and what the run leaves (state, impacts, maxima)."""
+    omega = ratio * math.sqrt(Parameters().K / Parameters().M)
+    h = 2 * math.pi / omega / samples
+    nodes = [1e-3 * math.sin(2 * math.pi * k / samples) for k in range(samples + 1)]
+    sim = Simulator(Parameters(voltage_model=1, R_load=3.59e6, p0=1e-3, q0=1e-3), y0=nodes[0])
+    c0 = time.process_time()
+    for k in range(HOLD_PERIODS * samples):
+        j = k % samples
+        sim.advance((k + 1) * h, nodes[j], (nodes[j + 1] - nodes[j]) / h)
+    cpu = (time.process_time() - c0) / (HOLD_PERIODS * samples)
+    return cpu, repr((sim.state, [vars(i) for i in sim.impacts], sim.maxima))  # NaN and -0.0 kept apart
+
+
+def compare_deferral() -> None:
+    """The searches put off against located at once, alternated, under the hold (median CPU a step)."""
+    print(f"the core under the harness's hold, {HOLD_PERIODS} periods from rest, free flight's searches put off "
+          f"against located at once ({HOLD_ROUNDS} runs each, alternated; CPU time a step, median):")
+    for ratio in HOLD_RATIOS:
+        times, runs = {True: [], False: []}, {}
+        for _ in range(HOLD_ROUNDS):
+            for defer in (True, False):
+                brackets.DEFER = defer
+                cpu, runs[defer] = hold_run(ratio)
+                times[defer].append(cpu)
+        brackets.DEFER = True
+        put_off, at_once = (sorted(times[k])[HOLD_ROUNDS // 2] for k in (True, False))
+        print(f"  {ratio:g} w_n: put off {put_off * 1e6:6.1f} us, at once {at_once * 1e6:6.1f} us, "
+              f"ratio {put_off / at_once:.3f}; the same bits: {'yes' if runs[True] == runs[False] else 'NO'}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--baseline", help="the src folder of another checkout, to time its core beside this one's")
@@ -152,6 +191,7 @@ def main():
           f"both cases: {'yes' if all(verdict) else 'NO'}")
     print("  (DI is a difference of two maxima: errors of a few 1e-16 m in each can cancel, so its error")
     print("   jumps with the tolerance; the nominal case amplifies 1e-16 m in p0 to ~3e-9 s at 2 s)")
+    compare_deferral()
 
 if __name__ == "__main__":
     main()
