@@ -116,15 +116,20 @@ class Deferred:
 
     - the search (``roots.crossings``) refines a root only on an interval whose first Bernstein
       coefficient has the sign before the crossing and whose last has the sign after it, and it
-      reports the end of an interval only where the last coefficient is zero within ``noise``. The
-      end coefficients are the values at the ends, to the rounding of the coefficients and of
-      their halving (below ``1e-12 A`` and a few ``noise``): so an interval that starts in ``[0, s]``
-      with the sign after the crossing is not refined, and none ends there with a zero;
-    - an interval that starts with the sign before it is refined from the left: every point the
-      refinement tries in ``[0, s]`` reads that sign (Horner's rounding is below ``1e-14 A``), and
-      it stops only at a point that reads zero, or where its bracket of signs has closed (on a
-      point that read the other sign), or within ``NEWTON_LAST`` of a point where the value is at
-      most ``NEWTON_LAST`` times the slope (``<= ORDER A``): none of these lies in ``[0, s]``.
+      reports the end of an interval only where the last coefficient is zero within ``noise``.
+      The end coefficients are the values at the ends, to the rounding of the coefficients and of
+      their halving (below ``1e-12 A`` and a few ``noise``): on ``[0, s]`` they have the sign of
+      ``a_0``, never zero;
+    - so where ``a_0`` has the sign after the crossing, no interval that starts in ``[0, s]`` is
+      refined, and none that ends there is reported;
+    - where it has the sign before, none that ends in ``[0, s]`` is refined or reported, and one
+      that ends beyond is refined from the left: every point the refinement tries in ``[0, s]``
+      reads that sign (Horner's rounding is below ``1e-14 A``), and it stops only at a point that
+      reads zero, or where its bracket of signs has closed on a point that read the other sign,
+      or within ``NEWTON_LAST`` of a point where the value is at most ``NEWTON_LAST`` times the
+      slope (``<= ORDER A``). Such a point lies beyond ``s``, so the root it gives lies beyond
+      the move's end: :data:`DEFER_MARGIN` exceeds both ``NEWTON_LAST`` and a closed bracket's
+      width.
     """
 
     __slots__ = ("terminal", "maxima", "clear", "until", "fail")
