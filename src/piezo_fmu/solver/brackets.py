@@ -209,6 +209,9 @@ class BracketMaps:
             np.concatenate([terms.reshape(-1, n), power.reshape(-1, n), bernstein_rows.reshape(-1, n)]).T)
         #: Where the state's coefficients end and the rows of the functions begin.
         self.split = STATE_TERMS * n
+        #: Where the base velocity enters ``p' = u' + v``: its power coefficient of order 0, then
+        #: its Bernstein row (one indexed addition instead of two on views).
+        self.v_index = self.split + np.array([2 * STATE_TERMS] + list(range(8 * STATE_TERMS, 9 * STATE_TERMS)))
         #: Rows (one per event function) of ``sum_i |functional_i| max_k |terms_k[i, j]|``: with the
         #: sizes ``|x_j|`` of the start state, a bound on the state terms an event function is made of.
         self.noise_rows = (np.abs(functionals).T @ np.abs(terms).max(axis=0)).tolist()
@@ -224,7 +227,7 @@ class BracketMaps:
         in the mirrored state, negated (``event_functionals``); the rates are the same."""
         mirror = object.__new__(BracketMaps)
         mirror.phase, mirror.split, mirror.noise_rows, mirror.noise_bounds = phase, self.split, self.noise_rows, self.noise_bounds
-        mirror.size_bound = self.size_bound
+        mirror.size_bound, mirror.v_index = self.size_bound, self.v_index
         mirror.stacked = self.stacked * signs[:, None] * mirror_rows(len(signs))
         return mirror
 
@@ -272,11 +275,10 @@ class BracketOpener:
         # One product gives the Taylor coefficients of the state, and the power and Bernstein
         # coefficients of the event functions (rows; the base velocity enters p' = u' + v below).
         z = np.array(xs) @ maps.stacked
+        if v != 0.0:
+            z[maps.v_index] += v  # G[2, 0] and B[2] below
         functions = z[maps.split:].reshape(9, STATE_TERMS)  # event functions, rates, Bernstein rows
         c, G, rates, B = z[:maps.split].reshape(STATE_TERMS, -1), functions[:3], functions[3:6], functions[6:]
-        if v != 0.0:
-            G[2, 0] += v
-            B[2] += v
         br = Bracket(c=c, t_start=t, tau=phase.h, base=y, v=v, rates=rates)
         # The rounding level of each event function: a few ulp of the largest state terms that
         # make it up, bounded from the start state (made only for the functions that need it).
@@ -290,7 +292,7 @@ class BracketOpener:
             g, b, row = G[j], B[j], values[j]
             start_value = row[0]  # the first Bernstein coefficient is the value at the start
             near_zero = abs(start_value) <= max(self.zero, NOISE_ULPS * EPS * maps.noise_bounds[j] * total)
-            if not near_zero and (min(row) > 0.0 or max(row) < 0.0):
+            if not near_zero and _one_strict_sign(row):
                 continue  # one strict sign, away from zero at the start: no root
             noise = rounding(noise_rows[j], sizes)
             if near_zero and abs(start_value) <= max(self.zero, noise):
@@ -340,12 +342,23 @@ class BracketOpener:
         return br
 
 
+def _one_strict_sign(row: list[float]) -> bool:
+    """``min(row) > 0 or max(row) < 0`` for finite values (a bracket's are: ``StateOverflow``), in
+    one pass: the first value's sign says which extreme can decide."""
+    first = row[0]
+    if first > 0.0:
+        return min(row) > 0.0
+    if first < 0.0:
+        return max(row) < 0.0
+    return False
+
+
 def _fall_search(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
                  v: float) -> tuple | None:
     """What :func:`_falls` searches: ``(g, b, noise, row)``, or None when the function keeps one
     strict sign on the bracket."""
     row = values[j]
-    if min(row) > 0.0 or max(row) < 0.0:
+    if _one_strict_sign(row):
         return None
     noise = rounding(noise_rows[j], sizes) + (NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
     return G[j], B[j], noise, row
