@@ -32,6 +32,7 @@ from reference import DEFAULT_ATOL, DEFAULT_RTOL, reference_run  # noqa: E402
 
 from piezo_fmu import Parameters, Simulator  # noqa: E402
 from piezo_fmu.solver import brackets  # noqa: E402
+from piezo_fmu.solver.batch import HarmonicHold  # noqa: E402
 
 T_END = 2.0
 CORE_REPEATS = 20
@@ -117,11 +118,9 @@ def compare_trees(baseline: str, rounds: int = 3) -> None:
 def hold_run(ratio: float, samples: int = 64) -> tuple:
     """The circuit damper under the harness's hold (1 mm, ``samples`` steps a period) from rest at
     ``p = q = 1 mm``: CPU seconds a step, and what the run leaves (state, impacts, maxima)."""
-    omega = ratio * math.sqrt(Parameters().K / Parameters().M)
-    h = 2 * math.pi / omega / samples
-    nodes = [1e-3 * math.sin(2 * math.pi * k / samples) for k in range(samples + 1)]
-    moves = [((k + 1) * h, nodes[k % samples], (nodes[k % samples + 1] - nodes[k % samples]) / h)
-             for k in range(HOLD_PERIODS * samples)]
+    hold = HarmonicHold(ratio * math.sqrt(Parameters().K / Parameters().M), 1e-3, samples=samples)
+    nodes, slopes = (a.tolist() for a in hold.nodes())
+    moves = [((k + 1) * hold.step, nodes[k % samples], slopes[k % samples]) for k in range(HOLD_PERIODS * samples)]
     return _timed(Parameters(voltage_model=1, R_load=3.59e6, p0=1e-3, q0=1e-3), nodes[0], moves)
 
 

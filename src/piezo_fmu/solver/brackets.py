@@ -7,7 +7,7 @@ power and Bernstein coefficients of the phase's event functions
 (:func:`piezo_fmu.model.dynamics.event_functionals`) and the rates of the energy ledger
 (:func:`piezo_fmu.model.energy.energy_rates`); then it locates the phase switch (the first
 terminal event) and the non-terminal events before it (``roots.py``). In free flight those
-searches are put off until a move may reach a root (:class:`Deferred`), with the same results.
+searches are put off until a move may reach a root (:class:`Searches`), with the same results.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ NOISE_ULPS = 64
 #: squares, in the ledger, stay inside double range.
 STATE_LIMIT = 1e150
 EPS = float(np.finfo(float).eps)
-#: Put off the root searches of free flight until a move may reach a root (:class:`Deferred`);
+#: Put off the root searches of free flight until a move may reach a root (:class:`Searches`);
 #: False locates every root when the bracket opens (the same roots: the tests compare both).
 DEFER = True
 #: How far (normalised time) beyond a move's end a put-off search is shown to have no root before
@@ -66,16 +66,16 @@ class Bracket:
     ledger: np.ndarray | None = None
     #: ``s**k`` at the present position, k < PRIMITIVE_TERMS: serves the state and the ledger.
     powers: np.ndarray = field(default_factory=lambda: POWERS_AT_START)
-    #: The root searches put off (free flight, :class:`Deferred`); None once they have run: then
+    #: The root searches put off (free flight, :class:`Searches`); None once they have run: then
     #: ``s_switch``, ``switch_to`` and ``events`` are final.
-    deferred: "Deferred | None" = None
+    deferred: "Searches | None" = None
 
     def located_to(self, s: float) -> None:
         """Make ``s_switch``, ``switch_to`` and the events up to ``s`` those of the searches run
-        when the bracket opened: run the put-off searches unless none has a root up to ``s``."""
-        deferred = self.deferred
-        if deferred is not None and s > deferred.until and not deferred.clear_until(s):
-            deferred.run(self)
+        when the bracket opened: run the put-off searches unless none has a root up to ``s``
+        (called while ``deferred`` is set and ``s`` beyond what it has shown clear)."""
+        if not self.deferred.clear_until(s):
+            self.deferred.run(self)
 
     def to_dict(self) -> dict:
         if self.deferred is not None:
@@ -98,8 +98,10 @@ class Bracket:
         return cls(**data)
 
 
-class Deferred:
-    """The root searches of a free-flight bracket, put off until a move may reach one of their roots.
+class Searches:
+    """The root searches of one bracket (``roots.crossings``): its switch, then the maxima of ``p``
+    and, in contact, the peaks of ``delta`` before it. The opener runs them at once in contact;
+    in free flight it puts them off until a move may reach one of their roots.
 
     A free-flight bracket is ``THETA`` radians of the motion long, often many communication steps;
     when the base moves, each step opens a new bracket and uses only its start. Its searches (the
@@ -132,17 +134,19 @@ class Deferred:
       width.
     """
 
-    __slots__ = ("terminal", "maxima", "clear", "until", "fail")
+    __slots__ = ("contact", "terminal", "maxima", "peaks", "clear", "fail")
 
-    def __init__(self):
-        #: The contact onsets' searches: ``(target, g, b, noise, row)``, in the opener's order.
+    def __init__(self, contact: bool):
+        self.contact = contact
+        #: The switch's searches: ``(target, g, b, noise, row)``, in the opener's order.
         self.terminal: list = []
-        #: The maxima of ``p``'s search ``(g, b, noise, row)`` (``_fall_search``), or None.
+        #: The searches ``(g, b, noise, row)`` (``_fall_search``) of the maxima of ``p`` and, in
+        #: contact, of the peaks of ``delta``; None where the function keeps one strict sign.
         self.maxima: tuple | None = None
-        #: Normalised time up to which no search has a root (shown so far), and the furthest end
-        #: of a move that this covers (``clear - DEFER_MARGIN``): a move that ends there needs no test.
+        self.peaks: tuple | None = None
+        #: Normalised time up to which no search has a root (shown so far; a move that ends
+        #: ``DEFER_MARGIN`` before it needs no test).
         self.clear = 0.0
-        self.until = -DEFER_MARGIN
         #: The shortest span whose test failed (1: the bracket's end, never shown clear).
         self.fail = 1.0
 
@@ -160,25 +164,32 @@ class Deferred:
         for trial in ((ahead, s) if s < ahead else (s,)):
             if all(_clear(g.tolist(), noise, trial) for _, g, _, noise, _ in self.terminal) and (
                     self.maxima is None or _clear(self.maxima[0].tolist(), self.maxima[2], trial)):
-                self.clear, self.until = trial, trial - DEFER_MARGIN
+                self.clear = trial
                 return True
             self.fail = trial
         return False
 
     def run(self, br: "Bracket") -> None:
-        """Run the searches as the opener would have: the switch, then the maxima before it."""
+        """Run the searches: the first root of the switch's functions (the earlier target on a
+        tie), then the non-terminal events up to it, in order."""
+        direction = -1 if self.contact else +1  # a contact ends as delta falls through zero
         for target, g, b, noise, row in self.terminal:
-            roots = crossings(g, +1, b, noise, row)
+            roots = crossings(g, direction, b, noise, row)
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], target
-        if self.maxima is not None:
-            br.events = [(s, MAXIMUM) for s in crossings(self.maxima[0], -1, *self.maxima[1:]) if s <= br.s_switch]
+        events = [] if self.maxima is None else [(s, MAXIMUM) for s in crossings(self.maxima[0], -1, *self.maxima[1:])
+                                                 if s <= br.s_switch]
+        if self.contact:
+            if self.peaks is not None:
+                events += [(s, PEAK) for s in crossings(self.peaks[0], -1, *self.peaks[1:]) if s <= br.s_switch]
+            events.sort()
+        br.events = events
         br.deferred = None
 
 
 def _clear(a: list[float], noise: float, s: float) -> bool:
     """Whether the polynomial ``a`` (power coefficients, normalised time) keeps the sign of its
-    start on ``[0, s]`` so clearly that no search could report a crossing there (:class:`Deferred`)."""
+    start on ``[0, s]`` so clearly that no search could report a crossing there (:class:`Searches`)."""
     reach = total = 0.0
     for coefficient in reversed(a[1:]):
         size = abs(coefficient)
@@ -287,7 +298,7 @@ class BracketOpener:
         direction = +1 if side == FREE else -1
         targets = (RIGHT, LEFT) if side == FREE else (FREE,)
         values = B.tolist()
-        deferred = Deferred() if DEFER and side == FREE else None
+        searches = Searches(side != FREE)
         for j in range(n_terminal):
             g, b, row = G[j], B[j], values[j]
             start_value = row[0]  # the first Bernstein coefficient is the value at the start
@@ -321,24 +332,17 @@ class BracketOpener:
                 g[0] = 0.0
                 b = b - start_value
                 row = [value - start_value for value in row]
-            if deferred is not None:
-                deferred.terminal.append((targets[j], g, b, noise, row))
-                continue
-            roots = crossings(g, direction, b, noise, row)
-            if roots and roots[0] < br.s_switch:
-                br.s_switch, br.switch_to = roots[0], targets[j]
-        if deferred is not None:
-            deferred.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
-            if deferred.terminal or deferred.maxima:
-                br.deferred = deferred
-            return br
+            searches.terminal.append((targets[j], g, b, noise, row))
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
-        events = [(s, MAXIMUM) for s in _falls(G, B, values, 2, sizes, noise_rows, v) if s <= br.s_switch]
+        searches.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
         if side != FREE:
             br.delta = G[0]
-            events += [(s, PEAK) for s in _falls(G, B, values, 1, sizes, noise_rows, v) if s <= br.s_switch]
-            events.sort()
-        br.events = events
+            searches.peaks = _fall_search(G, B, values, 1, sizes, noise_rows, v)
+        if DEFER and side == FREE:
+            if searches.terminal or searches.maxima:
+                br.deferred = searches  # run once a move may reach a root (Bracket.located_to)
+        else:
+            searches.run(br)
         return br
 
 
@@ -355,18 +359,11 @@ def _one_strict_sign(row: list[float]) -> bool:
 
 def _fall_search(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
                  v: float) -> tuple | None:
-    """What :func:`_falls` searches: ``(g, b, noise, row)``, or None when the function keeps one
-    strict sign on the bracket."""
+    """The search of where event function ``j`` falls through zero, ``(g, b, noise, row)``: maxima
+    of ``p`` (j = 2, where the base velocity adds to the rounding level) and peaks of ``delta`` (j = 1,
+    in contact); None when the function keeps one strict sign on the bracket."""
     row = values[j]
     if _one_strict_sign(row):
         return None
     noise = rounding(noise_rows[j], sizes) + (NOISE_ULPS * EPS * abs(v) if j == 2 else 0.0)
     return G[j], B[j], noise, row
-
-
-def _falls(G: np.ndarray, B: np.ndarray, values: list, j: int, sizes: list[float], noise_rows: list,
-           v: float) -> list[float]:
-    """Where event function ``j`` falls through zero: maxima of ``p`` (j = 2, where the base
-    velocity adds to the rounding level) and peaks of ``delta`` (j = 1, in contact)."""
-    search = _fall_search(G, B, values, j, sizes, noise_rows, v)
-    return [] if search is None else crossings(search[0], -1, *search[1:])

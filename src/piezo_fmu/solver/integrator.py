@@ -25,7 +25,7 @@ from ..model.damper import Damper
 from ..model.dynamics import FREE, LEFT, RIGHT, U, mirror_signs
 from ..model.parameters import Parameters
 from ..model.voltage import quasi_static
-from .brackets import MAXIMUM, PEAK, VOLTAGE_PEAK, Bracket, BracketMaps, BracketOpener, StateOverflow
+from .brackets import DEFER_MARGIN, MAXIMUM, PEAK, VOLTAGE_PEAK, Bracket, BracketMaps, BracketOpener, StateOverflow
 from .circuit import CircuitState
 from .ledger import Ledger
 from .metrics import MetricAccumulators, Metrics
@@ -125,7 +125,7 @@ class Integrator:
             s_stop = (t_end - br.t_start) / br.tau
             if s_stop > 1.0:
                 s_stop = 1.0
-            if br.deferred is not None and s_stop > br.deferred.until:
+            if br.deferred is not None and s_stop + DEFER_MARGIN > br.deferred.clear:
                 br.located_to(s_stop)  # the searches put off, run if this move may meet a root
             s_to = s_stop if s_stop < br.s_switch else br.s_switch
             while br.events and br.events[0][0] <= s_to:
