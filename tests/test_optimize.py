@@ -127,11 +127,12 @@ def test_bad_optimize_input_is_refused_with_exit_status_2(tmp_path, capsys, argv
 
 def test_the_forced_objective_can_weigh_the_worse_of_the_up_and_down_stable_responses(tmp_path):
     # At 1.15-1.2 w_n two stable motions coexist (tests/test_basins.py): the sweeps up and down from
-    # rest may end on different ones, and the worst term sees the larger.
+    # rest may end on different ones, and the worst term sees the larger. 32 communication steps a
+    # period (not 64) halve the FMU's work; what is tested, how the term combines the sweeps, is the same.
     assert run_cli("optimize", "--objective", "forced", "--param", "m=0.095:0.105", "--weight", "worst=1",
                    "--weight", "amplitude=0", "--weight", "power=0", "--ratio-min", 1.15, "--ratio-max", 1.2,
-                   "--count", 2, "--maxiter", 1, "--popsize", 1, "--no-grid", "--sensitivity-step", 0.5,
-                   "--jobs", 2, "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
+                   "--count", 2, "--samples", 32, "--maxiter", 1, "--popsize", 1, "--no-grid",
+                   "--sensitivity-step", 0.5, "--jobs", 2, "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
     records = [r for r in log(tmp_path) if r.get("status") == "ok" and r.get("terms")]
     assert records
     for record in records:
@@ -139,4 +140,5 @@ def test_the_forced_objective_can_weigh_the_worse_of_the_up_and_down_stable_resp
         without = measures.get("amplitude_without") or read(tmp_path)["references"]["amplitude_without"]
         assert terms["worst"] == pytest.approx(max(measures["amplitude"], measures["amplitude_down"]) / without)
         assert record["objective"] == pytest.approx(terms["worst"])
-    assert any(r["measures"]["amplitude_down"] != r["measures"]["amplitude"] for r in records)  # two sweeps
+    # Two motions, not the rounding of one: some design's sweeps end on orbits 10% apart or more.
+    assert any(abs(r["measures"]["amplitude_down"] / r["measures"]["amplitude"] - 1.0) > 0.1 for r in records)
