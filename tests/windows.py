@@ -127,35 +127,12 @@ def wine_failed_at_exit(completed: subprocess.CompletedProcess) -> bool:
     return completed.returncode == 127 and bool(lines) and lines[-1] == WINE_EXIT_ASSERTION
 
 
-def warm(extra: Optional[Mapping[str, str]] = None) -> None:
-    """Start the wineserver of the prefix of ``environment(extra)``, to stay 60 s after its last
-    program, and Wine's services in it, their output to ``/dev/null``; nothing when it is up (0.1
-    s), or when the prefix is not made yet (:func:`wine_prefix` makes it).
-
-    Else the first program of a server starts the services (``winedevice.exe`` and others), which
-    inherit its stdout and stderr and hold them open until the server ends them, about 3 s after
-    the program left; reading the program's output through pipes waits for that. The C host's
-    refusal took 2.6 s a run so, 0.01 s with the server up, with the same status and output.
-    (Files instead of pipes will not do: CPython under Wine 8 cannot make ``sys.stdout`` of a
-    file, "init_sys_streams: Invalid handle".)"""
-    env = environment(extra)
-    if not (Path(env["WINEPREFIX"]) / "system.reg").is_file():
-        return
-    quiet = {"stdin": subprocess.DEVNULL, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "env": env}
-    subprocess.run([str(WINESERVER), "-p60"], timeout=60, **quiet)  # status 2 when it is up already
-    subprocess.run([str(WINE), "cmd", "/c", "exit"], timeout=300, **quiet)
-
-
 def run(command: Sequence[str], extra: Optional[Mapping[str, str]] = None, timeout: float = 600,
         cwd: Optional[Path] = None) -> subprocess.CompletedProcess:
     """Run ``command`` (a Windows program through ``WINE``, or Wine's tools) in the bare environment;
     its exit status is not checked. A run whose Wine failed at exit (:func:`wine_failed_at_exit`)
     is run once more, with a warning that the suite's summary shows; the second run's result is
-    the answer, whatever it is. A Windows program runs beside a wineserver already up, with its
-    services (:func:`warm`)."""
-    if command and command[0] == str(WINE):
-        warm(extra)
-
+    the answer, whatever it is."""
     def once() -> subprocess.CompletedProcess:
         return subprocess.run(list(command), env=environment(extra), stdin=subprocess.DEVNULL, capture_output=True,
                               text=True, timeout=timeout, cwd=cwd)
