@@ -123,7 +123,7 @@ def wine_failed_at_exit(completed: subprocess.CompletedProcess) -> bool:
     the C host under Wine in a whole suite (2 workers) ended so, after it had printed everything it
     had to; 160 runs of the same command alone (two at a time) did not. Windows has no such
     loader: the program's own exit status is lost, not wrong."""
-    lines = completed.stderr.rstrip("\n").splitlines() if isinstance(completed.stderr, str) else []
+    lines = completed.stderr.rstrip("\n").splitlines()
     return completed.returncode == 127 and bool(lines) and lines[-1] == WINE_EXIT_ASSERTION
 
 
