@@ -134,7 +134,7 @@ class Searches:
       width.
     """
 
-    __slots__ = ("contact", "terminal", "maxima", "peaks", "clear", "fail")
+    __slots__ = ("contact", "terminal", "maxima", "peaks", "clear", "fail", "bounded")
 
     def __init__(self, contact: bool):
         self.contact = contact
@@ -149,6 +149,8 @@ class Searches:
         self.clear = 0.0
         #: The shortest span whose test failed (1: the bracket's end, never shown clear).
         self.fail = 1.0
+        #: ``(coefficients as a list, noise)`` of every search, made at the first test.
+        self.bounded: list | None = None
 
     def clear_until(self, s_stop: float) -> bool:
         """Whether no search has a root in ``(0, s_stop]``, shown as in the class's text. A bracket
@@ -160,10 +162,13 @@ class Searches:
             return True
         if s >= self.fail:
             return False
+        if self.bounded is None:
+            self.bounded = [(g.tolist(), noise) for _, g, _, noise, _ in self.terminal]
+            if self.maxima is not None:
+                self.bounded.append((self.maxima[0].tolist(), self.maxima[2]))
         ahead = min(2.0 * self.clear, 0.5 * (self.clear + self.fail))
         for trial in ((ahead, s) if s < ahead else (s,)):
-            if all(_clear(g.tolist(), noise, trial) for _, g, _, noise, _ in self.terminal) and (
-                    self.maxima is None or _clear(self.maxima[0].tolist(), self.maxima[2], trial)):
+            if all(_clear(a, noise, trial) for a, noise in self.bounded):
                 self.clear = trial
                 return True
             self.fail = trial
