@@ -30,6 +30,20 @@ Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper,
    (0: the compiler's choice) at the largest size, with the same bits or not
    (``kernel.GPU_REGISTERS`` is the one measured best).
 
+5. With ``--orderings 1,20,100``: at the largest size, the launch alone from the starts marched
+   that many periods, the trajectories in their own order and sorted by their last period (onsets,
+   side, ``p``), each order's sections put back and compared with the first's, bit for bit: how
+   much of the GPU's time is warps whose threads do unlike work.
+6. With ``--march 600``: at the largest size, the launch alone along a march of that many periods
+   (``--march-block`` a launch, unobserved as ``settle`` marches), launch by launch, as the
+   transients die out: in its own order, and sorted before each launch (on the host, outside the
+   clock, its time given apart), the final states compared bit for bit.
+
+7. With ``--settle 100000``: ``settle``, the studies' march (resolved starts leave the ensemble
+   after each block), of that many starts at ``--settle-ratio`` (1.25, where the chaotic
+   transients are long) to where each goes, on the GPU, and of the first ``--settle-cpu`` on every
+   CPU core: the rate a study gets, and how many of the starts both marched went to the same place.
+
 Prints one JSON object. With ``NUMBA_ENABLE_CUDASIM=1`` it runs on numba's CUDA simulator
 (slowly: small sizes only), which checks the script, not the GPU.
 """
@@ -101,13 +115,21 @@ def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat", 
     ``march``, the nested loops) from ``namespace`` (the kernel's GPU target when None): the arrays
     on the GPU before the clock starts, the launch timed to the device's synchronisation, after one
     untimed launch that compiles it. With ``keep``, also the sections of the last march."""
-    from numba import cuda
-
-    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
     n = len(states)
     state = np.zeros((7, n))
     state[:4] = states.T
-    host = (True, state, np.zeros(n, bool), np.zeros(n, np.int64)) + tables.arguments() + (
+    return resident_state(state, np.zeros(n, bool), drive, periods, name, namespace, keep)
+
+
+def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, name: str = "march_flat",
+                   namespace: dict | None = None, keep: bool = False):
+    """:func:`resident` from a whole state ((7, n): ``p, p', q, q'``, side, voltages) and its
+    ``failed`` flags."""
+    from numba import cuda
+
+    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    n = state.shape[1]
+    host = (True, np.ascontiguousarray(state), failed.copy(), np.zeros(n, np.int64)) + tables.arguments() + (
         np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
         np.empty((periods, n)), np.empty((periods, n)))
     compiled = (namespace or kernel.target("gpu"))[name]
@@ -125,6 +147,119 @@ def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat", 
     row = {"starts": n, "periods": periods, "wall_s": float(np.median(times)),
            "start_periods_per_s": work / float(np.median(times)), "best_start_periods_per_s": work / min(times)}
     return (row, args[6].copy_to_host()) if keep else row
+
+
+def orderings(states: np.ndarray, drive, periods: int, transients: list) -> list:
+    """The launch alone (as :func:`resident`) from the starts marched ``transients`` periods, with
+    the trajectories in their own order and sorted by what their last period did: the same work, in
+    warps of threads whose work is alike (a warp executes the union of its threads' branches). Each
+    order's sections, put back in the starts' order, must be the first order's bit for bit: a
+    trajectory's march does not depend on its neighbours."""
+    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    n = len(states)
+    state, failed, groups = np.zeros((7, n)), np.zeros(n, bool), np.zeros(n, np.int64)
+    state[:4] = states.T
+    rows, marched = [], 0
+    for transient in transients:
+        while marched < transient:  # in blocks, whose sections fit in memory at any size
+            block = min(transient - marched, 20)
+            last = kernel.march("gpu", tables, state, failed, groups, block, observe=False)
+            marched += block
+        impacts, sides, p = last["impacts"][-1], last["sides"][-1], last["sections"][-1, :, 0]
+        orders = {"as_started": np.arange(n), "impacts": np.argsort(impacts, kind="stable"),
+                  "impacts_side_p": np.lexsort((p, sides, impacts)), "p": np.argsort(p, kind="stable")}
+        moved = int((orders["impacts_side_p"] != np.arange(n)).sum())
+        row = {"after_periods": transient, "moved_by_impacts_side_p": moved,
+               "impacts_last_period": {str(k): int(c) for k, c in
+                                                                   zip(*np.unique(impacts, return_counts=True))}}
+        first = None
+        for key, order in orders.items():
+            timing, sections = resident_state(state[:, order], failed[order], drive, periods, keep=True)
+            back = np.empty_like(sections)
+            back[:, order] = sections
+            first = back if first is None else first
+            row[key] = {**timing, "same_bits_as_started": bool(np.array_equal(back, first, equal_nan=True))}
+            row[key]["over_as_started"] = timing["start_periods_per_s"] / row["as_started"]["start_periods_per_s"]
+        rows.append(row)
+    return rows
+
+
+def long_march(states: np.ndarray, drive, total: int, block: int, sort: bool) -> dict:
+    """The launch alone (the arrays staying on the GPU, as in :func:`resident`) along a march of
+    ``total`` periods from the starts, ``block`` periods a launch, unobserved (as ``settle``
+    marches): start-periods a second of each launch, as the transients die out, and of the whole.
+    With ``sort``, the trajectories are put in order of their last period (onsets, side, ``p``)
+    before each launch, on the host, outside the clock (its time is given apart); their final states,
+    put back in the starts' order, are returned for the bits to be compared."""
+    from numba import cuda
+
+    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    n = len(states)
+    state = np.zeros((7, n))
+    state[:4] = states.T
+    failed, ids = np.zeros(n, bool), np.arange(n)
+    device = [cuda.to_device(a) for a in (state, failed, np.zeros(n, np.int64)) + tables.arguments()]
+    outputs = [cuda.device_array(shape, dtype) for shape, dtype in (((block, n, 4), float), ((block, n), float),
+                                                                     ((block, n), np.int64), ((block, n), float),
+                                                                     ((block, n), float))]
+    launch = kernel.target("gpu")["march_flat"][(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS,
+                                                kernel.GPU_THREADS]
+    rates, times, sorting = [], [], 0.0
+    for _ in range(total // block):
+        cuda.synchronize()
+        begin = time.perf_counter()
+        launch(False, *device, *outputs)
+        cuda.synchronize()
+        times.append(time.perf_counter() - begin)
+        rates.append(round(n * block / times[-1] / 1e6, 1))
+        if sort:
+            begin = time.perf_counter()
+            impacts, sides = outputs[2][block - 1].copy_to_host(), outputs[1][block - 1].copy_to_host()
+            p = outputs[0][block - 1].copy_to_host()[:, 0]
+            order = np.lexsort((p, sides, impacts))
+            ids = ids[order]
+            state, failed = device[0].copy_to_host()[:, order], device[1].copy_to_host()[order]
+            device[0], device[1] = cuda.to_device(np.ascontiguousarray(state)), cuda.to_device(failed)
+            sorting += time.perf_counter() - begin
+    final = np.empty((7, n))
+    final[:, ids] = device[0].copy_to_host()
+    row = {"starts": n, "periods": block * len(times), "block": block, "sorted": sort,
+           "millions_a_second_each_block": rates, "wall_s": sum(times),
+           "start_periods_per_s": n * block * len(times) / sum(times)}
+    if sort:
+        row["sorting_on_the_host_s"] = sorting
+        row["moved"] = int((ids != np.arange(n)).sum())
+    return row, final
+
+
+def settled(states: np.ndarray, ratio: float, budget: int, cpu_starts: int) -> dict:
+    """``settle`` (the studies' march: every start to where it goes, resolved starts taken out after
+    each block, Newton on the orbits, the undecided measured) at ``ratio`` sqrt(K/M) with a budget of
+    ``budget`` periods: all ``states`` on the GPU, the first ``cpu_starts`` of them on every CPU
+    core. Wall time, start-periods marched and their rate, the verdicts' counts, and on the starts
+    both marched, how many went to the same place (their final sections within 1e-7 m, the same
+    side): a chaotic transient parted by the last bit may end on another orbit."""
+    from piezo_fmu.solver.batch import SettleSettings, settle
+
+    drive = HarmonicHold(ratio * W_N, Y)
+    rows, finals = {}, {}
+    for device, count in (("gpu", len(states)), ("cpu", cpu_starts)):
+        begin = time.perf_counter()
+        result = settle(Parameters(**VALUES), drive, states[:count], settings=SettleSettings(max_cycles=budget),
+                        device=device)
+        wall = time.perf_counter() - begin
+        labels = np.asarray(result.labels)
+        rows[device] = {"starts": count, "wall_s": wall, "start_periods": int(result.cycles),
+                        "start_periods_per_s": result.cycles / wall, "attractors": len(result.attractors),
+                        "undecided": int((labels == -1).sum()), "failed": int((labels == -2).sum()),
+                        "median_periods": float(np.median(result.periods)),
+                        "longest_periods": int(np.max(result.periods))}
+        finals[device] = (np.asarray(result.final)[:cpu_starts], np.asarray(result.final_sides)[:cpu_starts])
+    scale = np.array([1.0, 1.0 / drive.omega, 1.0, 1.0 / drive.omega])
+    gap = (np.abs(finals["gpu"][0] - finals["cpu"][0]) * scale).max(axis=1)
+    same = (gap <= 1e-7) & (finals["gpu"][1] == finals["cpu"][1])
+    return {"ratio": ratio, "budget": budget, **rows, "compared": cpu_starts, "same_destination": int(same.sum()),
+            "gpu_over_cpu": rows["gpu"]["start_periods_per_s"] / rows["cpu"]["start_periods_per_s"]}
 
 
 def register_caps(states: np.ndarray, drive, periods: int, caps: list) -> list:
@@ -200,6 +335,17 @@ def main() -> int:
     parser.add_argument("--agree", type=int, default=10_000, help="starts compared with the CPU")
     parser.add_argument("--agree-periods", type=int, default=20)
     parser.add_argument("--cpu-up-to", type=int, default=100_000, help="largest size also marched on the CPU")
+    parser.add_argument("--orderings", default="", help="periods of transient after which the launch is timed "
+                        "with the trajectories sorted by their last period, at the largest size, comma-separated; "
+                        "none by default")
+    parser.add_argument("--march", type=int, default=0, help="periods of a long march at the largest size, "
+                        "timed launch by launch, in its own order and sorted; none by default")
+    parser.add_argument("--march-block", type=int, default=20, help="periods a launch of the long march")
+    parser.add_argument("--settle", type=int, default=0, help="starts settled as a study does, on the GPU "
+                        "(and --settle-cpu of them on the CPU); none by default")
+    parser.add_argument("--settle-cpu", type=int, default=10_000)
+    parser.add_argument("--settle-ratio", type=float, default=1.25, help="its frequency over sqrt(K/M)")
+    parser.add_argument("--settle-budget", type=int, default=6000, help="its budget of periods a start")
     parser.add_argument("--registers", default="", help="register caps a thread to compare at the largest size, "
                         "comma-separated (0: the compiler's choice); none by default")
     args = parser.parse_args()
@@ -240,6 +386,19 @@ def main() -> int:
     if args.registers:
         caps = [int(c) for c in args.registers.split(",")]
         report["register_caps"] = register_caps(states[:sizes[-1]], drive, args.periods, caps)
+    if args.orderings:
+        transients = [int(t) for t in args.orderings.split(",")]
+        report["orderings"] = orderings(states[:sizes[-1]], drive, args.periods, transients)
+    if args.march:
+        block = min(args.march_block, args.march)
+        plain, plain_final = long_march(states[:sizes[-1]], drive, args.march, block, sort=False)
+        ordered, ordered_final = long_march(states[:sizes[-1]], drive, args.march, block, sort=True)
+        ordered["same_bits_as_unsorted"] = bool(np.array_equal(plain_final, ordered_final, equal_nan=True))
+        ordered["over_unsorted"] = ordered["start_periods_per_s"] / plain["start_periods_per_s"]
+        report["long_march"] = [plain, ordered]
+    if args.settle:
+        many = starts(args.settle, args.settle_ratio * W_N)
+        report["settle"] = settled(many, args.settle_ratio, args.settle_budget, min(args.settle_cpu, args.settle))
     largest = rows[-1]["gpu_resident"]["start_periods_per_s"]
     report["target"] = {"start_periods_per_s": TARGET, "at_starts": 1_000_000, "largest_size": sizes[-1],
                         "resident_at_largest": largest, "met": sizes[-1] >= 1_000_000 and largest >= TARGET}

@@ -210,6 +210,15 @@ def test_the_lyapunov_measure_marches_the_pair_the_array_engine_marched():
     assert np.max(np.abs(fast["samples"][-1] - pair.states[:5, 0])) < 1e-12
 
 
+def on_the_simulator(script: Path, starts: np.ndarray) -> list[str]:
+    """The lines ``script`` prints, run on numba's CUDA simulator with ``starts`` (JSON) as its
+    argument; it must succeed."""
+    result = subprocess.run([sys.executable, str(script), json.dumps(starts.tolist())], capture_output=True, text=True,
+                            env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"), timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return result.stdout.splitlines()
+
+
 def test_the_gpu_code_is_the_same_source_run_on_numbas_cuda_simulator(tmp_path):
     """The GPU path (numba's CUDA target: one thread a trajectory, one launch a block of periods)
     compiled from the same source, run on numba's CUDA simulator (CI has no GPU): the motion of
@@ -224,18 +233,23 @@ def test_the_gpu_code_is_the_same_source_run_on_numbas_cuda_simulator(tmp_path):
         "drive = HarmonicHold(1.25 * math.sqrt(1000.0), 1e-3)\n"
         "starts = np.array(json.loads(sys.argv[1]))\n"
         "runs = [Ensemble(params, drive, starts, device=d).advance(2, observe=True) for d in ('gpu', 'cpu')]\n"
+        "from piezo_fmu.solver.batch import kernel\n"
+        "e = Ensemble(params, drive, starts, device='gpu')\n"
+        "quiet = kernel.march('gpu', e._tables, e._state, e.failed, e.group, 2, observe=False)\n"
+        "print(json.dumps({'extremes': [bool(np.isnan(quiet[k]).all()) for k in ('top', 'bottom')],\n"
+        "                  'writeable': quiet['top'].flags.writeable,\n"
+        "                  'gap': float(np.abs(quiet['sections'] - runs[0]['sections']).max())}))\n"
         "print(json.dumps({k: [runs[0][k].tolist(), runs[1][k].tolist()] for k in runs[0]}))\n")
-    starts = random_starts(DAMPERS["coupled circuit"], 3, seed=3)
-    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
-    result = subprocess.run([sys.executable, str(script), json.dumps(starts.tolist())], capture_output=True, text=True,
-                            env=env, timeout=600)
-    assert result.returncode == 0, result.stderr[-3000:]
-    runs = json.loads(result.stdout.splitlines()[-1])
+    lines = on_the_simulator(script, random_starts(DAMPERS["coupled circuit"], 3, seed=3))
+    runs = json.loads(lines[-1])
     gpu, cpu = ({k: np.array(v[j]) for k, v in runs.items()} for j in (0, 1))
     assert cpu["impacts"].sum() > 0
     assert np.array_equal(gpu["impacts"], cpu["impacts"])
     assert np.array_equal(gpu["sides"], cpu["sides"])
     assert scaled_gap(gpu["sections"], cpu["sections"], 1.25 * W_N) < 1e-12
+    # unobserved, the GPU's extremes (NaN) are not copied back: a read-only NaN view; the motion is the same
+    quiet = json.loads(lines[-2])
+    assert quiet == {"extremes": [True, True], "writeable": False, "gap": 0.0}
 
 
 def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine_has(tmp_path):
@@ -244,7 +258,8 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     row and finds the GPU path's sections equal to the CPU's."""
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT / "src"))
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_gpu.py"), "--sizes", "3,5",
-                             "--periods", "2", "--agree", "4", "--agree-periods", "2", "--registers", "0,64"],
+                             "--periods", "2", "--agree", "4", "--agree-periods", "2", "--registers", "0,64",
+                             "--orderings", "1", "--march", "4", "--march-block", "2"],
                             capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout)
@@ -261,6 +276,15 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     caps = report["register_caps"]
     assert [row["registers_cap"] for row in caps] == [None, 64]
     assert all(row["same_bits_as_first"] and row["start_periods_per_s"] > 0.0 for row in caps)
+    # sorted, the trajectories march as in their own order, bit for bit
+    (ordering,) = report["orderings"]
+    assert sum(ordering["impacts_last_period"].values()) == 5 and ordering["moved_by_impacts_side_p"] > 0
+    for key in ("as_started", "impacts", "impacts_side_p", "p"):
+        assert ordering[key]["same_bits_as_started"] and ordering[key]["start_periods_per_s"] > 0.0, key
+    plain, ordered = report["long_march"]
+    assert (plain["sorted"], ordered["sorted"]) == (False, True)
+    assert plain["periods"] == ordered["periods"] == 4 and len(ordered["millions_a_second_each_block"]) == 2
+    assert ordered["same_bits_as_unsorted"] is True and ordered["moved"] > 0
 
 
 def test_a_numba_cuda_that_cannot_compile_with_this_numpy_is_named_before_any_march():

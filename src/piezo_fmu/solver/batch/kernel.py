@@ -270,14 +270,19 @@ def march(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray, gr
     """March every trajectory of ``state`` ((7, n) host: ``p, p', q, q'``, side, left and right
     voltage; updated in place, as is ``failed``) ``periods`` periods. Returns host arrays:
     ``sections`` (periods, n, 4), ``sides`` and ``impacts`` (periods, n), and with ``observe``
-    ``top`` and ``bottom`` (NaN without). ``flat`` chooses the flat loop or the nested one (the
-    target's own, :data:`FLAT`, when None): the same bits."""
+    ``top`` and ``bottom`` (NaN without; on a GPU, a read-only view then, not copied back).
+    ``flat`` chooses the flat loop or the nested one (the target's own, :data:`FLAT`, when None):
+    the same bits."""
     n = state.shape[1]
     outputs = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
                np.empty((periods, n)), np.empty((periods, n)))
     name = "march_flat" if (FLAT[device] if flat is None else flat) else "march"
-    _launch(device, name, (observe, state, failed, groups) + tables.arguments() + outputs, n, (1, 2), 5)
+    args = (observe, state, failed, groups) + tables.arguments() + outputs
+    # unobserved, the kernel writes NaN for the extremes: a GPU's need not be copied back
+    _launch(device, name, args, n, (1, 2), 5, kept=None if observe else len(args) - 2)
     sections, sides, impacts, top, bottom = outputs
+    if not observe and device != "cpu":  # read-only, untouched memory
+        top = bottom = np.broadcast_to(np.nan, (periods, n))
     return {"sections": sections, "sides": sides.astype(np.int64), "impacts": impacts, "top": top, "bottom": bottom}
 
 
@@ -297,10 +302,11 @@ def separate(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray,
     return {"logs": logs, "samples": samples, "impacts": impacts, "top": top, "bottom": bottom}
 
 
-def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs: int) -> None:
+def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs: int,
+            kept: int | None = None) -> None:
     """Run the driver ``name`` over ``n`` trajectories; on a GPU, copy the inputs there (the last
     ``outputs`` arguments are only allocated there: the kernel writes them whole) and the
-    ``updated`` ones and the outputs back."""
+    ``updated`` ones and the outputs back (those before the argument ``kept`` only, when given)."""
     compiled = target(device)[name]
     if n == 0:
         return
@@ -313,5 +319,5 @@ def _launch(device: str, name: str, args: tuple, n: int, updated: tuple, outputs
     on_device = [a if not isinstance(a, np.ndarray) else cuda.device_array_like(a) if k >= first_output
                  else cuda.to_device(np.ascontiguousarray(a)) for k, a in enumerate(args)]
     compiled[(n + GPU_THREADS - 1) // GPU_THREADS, GPU_THREADS](*on_device)
-    for k in list(updated) + list(range(first_output, len(args))):
+    for k in list(updated) + list(range(first_output, len(args) if kept is None else kept)):
         on_device[k].copy_to_host(args[k])
