@@ -252,6 +252,45 @@ def test_the_gpu_code_is_the_same_source_run_on_numbas_cuda_simulator(tmp_path):
     assert quiet == {"extremes": [True, True], "writeable": False, "gap": 0.0}
 
 
+def test_a_study_on_the_gpu_marches_its_starts_there_and_newtons_small_ensembles_on_the_cpu(tmp_path):
+    """``settle`` on the GPU (numba's CUDA simulator here): the starts march on the GPU, the orbit
+    finder's ensembles (Newton's seeds and neighbours, a few trajectories each, thousands of launches
+    that cost milliseconds each on a GPU) on the CPU; the verdicts are the CPU's."""
+    script = tmp_path / "settle.py"
+    script.write_text(
+        "import json, math, sys\n"
+        "import numpy as np\n"
+        "from piezo_fmu import Parameters\n"
+        "from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, kernel, settle\n"
+        "launches = []\n"
+        "launch = kernel._launch\n"
+        "def spy(device, name, args, n, *rest, **named):\n"
+        "    launches.append([device, name, n])\n"
+        "    return launch(device, name, args, n, *rest, **named)\n"
+        "kernel._launch = spy\n"
+        "params = Parameters(voltage_model=1, R_load=3.59e6)\n"
+        "drive = HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)\n"
+        "starts = np.array(json.loads(sys.argv[1]))\n"
+        "runs = {}\n"
+        "for device in ('gpu', 'cpu'):\n"
+        "    done = settle(params, drive, starts, settings=SettleSettings(max_cycles=200), device=device)\n"
+        "    runs[device] = {'labels': done.labels.tolist(), 'periods': done.periods.tolist(),\n"
+        "                    'final': done.final.tolist(), 'attractors': len(done.attractors),\n"
+        "                    'launches': launches[:]}\n"
+        "    launches.clear()\n"
+        "print(json.dumps(runs))\n")
+    runs = json.loads(on_the_simulator(script, random_starts(DAMPERS["nominal"], 4, seed=5))[-1])
+    gpu, cpu = runs["gpu"], runs["cpu"]
+    marches = [n for device, name, n in gpu["launches"] if device == "gpu"]
+    assert marches and marches[0] == 4  # the starts, on the GPU
+    newtons = [n for device, name, n in gpu["launches"] if device == "cpu"]
+    assert newtons, "the orbit finder marched nothing on the CPU"
+    assert all(device == "cpu" for device, name, n in cpu["launches"])
+    assert gpu["labels"] == cpu["labels"] and min(cpu["labels"]) >= 0  # every start reached an orbit
+    assert gpu["periods"] == cpu["periods"] and gpu["attractors"] == cpu["attractors"]
+    assert np.max(np.abs(np.array(gpu["final"]) - np.array(cpu["final"]))) < 1e-12
+
+
 def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine_has(tmp_path):
     """``benchmarks/bench_gpu.py`` (the one call a session lent a GPU makes) on numba's CUDA
     simulator, tiny sizes, run from the source tree (``PYTHONPATH=src``): it reports each throughput

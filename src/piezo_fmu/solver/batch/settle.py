@@ -162,8 +162,9 @@ def _finite(value) -> float | None:
 def settle(params, drives, starts, groups=None, settings: SettleSettings = SettleSettings(),
            device: str = "cpu", progress=None, sides=None, measured: bool = True) -> Settled:
     """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
-    ``drives`` (one, or one per group) to where each goes (see the module's text).
-    ``progress(done, total)`` is called after each block. With ``measured`` False, the starts
+    ``drives`` (one, or one per group) to where each goes (see the module's text), on ``device``;
+    the orbit finder's small ensembles march on the CPU. ``progress(done, total)`` is called after
+    each block. With ``measured`` False, the starts
     undecided at the budget are not measured (a cloud wanted only for when its starts resolve):
     they come back with NaN measures, no samples, and their start as ``final``."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
@@ -172,7 +173,10 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     groups = np.zeros(n, int) if groups is None else np.asarray(groups, int)
     model = BatchModel.of(params)
     tolerance = np.array([settings.tolerance * max(d.amplitude, 1e-300) for d in drives])
-    finder = OrbitFinder(model, drives, tolerance, device)
+    # Newton's seeds, their neighbours and the checks of an orbit make thousands of small ensembles: on
+    # a GPU each launch costs milliseconds of transfers and latency (13,235 of them were 60 s of an
+    # 82 s settle on an H200), so they march on the CPU whatever ``device`` (docs/benchmarks.md)
+    finder = OrbitFinder(model, drives, tolerance, "cpu")
     linear = [linear_orbit(model, d) for d in drives]
     scales = np.array([scale_of(d) for d in drives])
     state = _State(n, settings)
