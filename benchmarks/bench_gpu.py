@@ -38,7 +38,6 @@ Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper,
    (``--march-block`` a launch, unobserved as ``settle`` marches), launch by launch, as the
    transients die out: in its own order, and sorted before each launch (on the host, outside the
    clock, its time given apart), the final states compared bit for bit.
-
 7. With ``--settle 100000``: ``settle``, the studies' march (resolved starts leave the ensemble
    after each block), of that many starts at ``--settle-ratio`` (1.25, where the chaotic
    transients are long) to where each goes, on the GPU, and of the first ``--settle-cpu`` on every
@@ -169,9 +168,9 @@ def orderings(states: np.ndarray, drive, periods: int, transients: list) -> list
         orders = {"as_started": np.arange(n), "impacts": np.argsort(impacts, kind="stable"),
                   "impacts_side_p": np.lexsort((p, sides, impacts)), "p": np.argsort(p, kind="stable")}
         moved = int((orders["impacts_side_p"] != np.arange(n)).sum())
+        counts = dict(zip(*np.unique(impacts, return_counts=True)))
         row = {"after_periods": transient, "moved_by_impacts_side_p": moved,
-               "impacts_last_period": {str(k): int(c) for k, c in
-                                                                   zip(*np.unique(impacts, return_counts=True))}}
+               "impacts_last_period": {str(k): int(c) for k, c in counts.items()}}
         first = None
         for key, order in orders.items():
             timing, sections = resident_state(state[:, order], failed[order], drive, periods, keep=True)
@@ -205,14 +204,14 @@ def long_march(states: np.ndarray, drive, total: int, block: int, sort: bool) ->
     launch = kernel.target("gpu")["march_flat"][(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS,
                                                 kernel.GPU_THREADS]
     rates, times, sorting = [], [], 0.0
-    for _ in range(total // block):
+    for launches_left in range(total // block - 1, -1, -1):
         cuda.synchronize()
         begin = time.perf_counter()
         launch(False, *device, *outputs)
         cuda.synchronize()
         times.append(time.perf_counter() - begin)
         rates.append(round(n * block / times[-1] / 1e6, 1))
-        if sort:
+        if sort and launches_left:
             begin = time.perf_counter()
             impacts, sides = outputs[2][block - 1].copy_to_host(), outputs[1][block - 1].copy_to_host()
             p = outputs[0][block - 1].copy_to_host()[:, 0]
@@ -243,6 +242,8 @@ def settled(states: np.ndarray, ratio: float, budget: int, cpu_starts: int) -> d
 
     drive = HarmonicHold(ratio * W_N, Y)
     rows, finals = {}, {}
+    # the bookkeeping's compiled code (the CPU's on either device), compiled outside the clock
+    settle(Parameters(**VALUES), drive, states[:64], settings=SettleSettings(max_cycles=40), device="cpu")
     for device, count in (("gpu", len(states)), ("cpu", cpu_starts)):
         begin = time.perf_counter()
         result = settle(Parameters(**VALUES), drive, states[:count], settings=SettleSettings(max_cycles=budget),

@@ -298,7 +298,8 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT / "src"))
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_gpu.py"), "--sizes", "3,5",
                              "--periods", "2", "--agree", "4", "--agree-periods", "2", "--registers", "0,64",
-                             "--orderings", "1", "--march", "4", "--march-block", "2"],
+                             "--orderings", "1", "--march", "4", "--march-block", "2",
+                             "--settle", "4", "--settle-cpu", "4", "--settle-budget", "400", "--settle-ratio", "1.2"],
                             capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout)
@@ -324,6 +325,11 @@ def test_the_gpu_benchmark_runs_on_the_simulator_with_the_packages_a_gpu_machine
     assert (plain["sorted"], ordered["sorted"]) == (False, True)
     assert plain["periods"] == ordered["periods"] == 4 and len(ordered["millions_a_second_each_block"]) == 2
     assert ordered["same_bits_as_unsorted"] is True and ordered["moved"] > 0
+    settled = report["settle"]
+    assert (settled["gpu"]["starts"], settled["cpu"]["starts"], settled["compared"]) == (4, 4, 4)
+    assert settled["gpu"]["undecided"] == settled["cpu"]["undecided"] == 0
+    assert settled["same_destination"] == 4  # the simulator's motion is the CPU's
+    assert settled["gpu"]["start_periods"] > 0 and settled["cpu"]["start_periods_per_s"] > 0.0
 
 
 def test_a_numba_cuda_that_cannot_compile_with_this_numpy_is_named_before_any_march():
