@@ -46,7 +46,7 @@ class Marcher:
                 self.fmu.setReal([v.valueReference], [float(value)])
 
     def march(self, values: dict, omega: float, amplitude: float, start, periods: int, samples: int = 64,
-              phase: float = 0.0, trace: bool = False) -> dict:
+              phase: float = 0.0, trace: bool = False, until=None) -> dict:
         """``periods`` forcing periods from ``start`` (``p, p', q, q'``) at base phase ``phase``
         (rad): the state at the end of each period (``sections``) and the contact onsets in each
         (``onsets``); with ``trace``, also the largest and smallest sampled ``p`` of each (``top``,
@@ -54,7 +54,9 @@ class Marcher:
         apart. Without it the FMU is read only at the period's end: what it reads there is the same
         to the bit (``test_fmu``: which outputs a host reads, and when, changes no motion it reads),
         and a long march is about a third faster (a reading goes through fmpy and books the FMU's
-        energy ledger: about a third of a step's cost under the moving base)."""
+        energy ledger: about a third of a step's cost under the moving base). With ``until`` (a
+        function of the run so far), the march stops early at the end of the first period, among
+        every :data:`LOOK`-th, where it returns True: ``periods`` is then a cap."""
         if self.started:
             self.fmu.reset()
         self.started = True
@@ -76,7 +78,7 @@ class Marcher:
         steps = [self.fmu.getReal(refs[:2])] if trace else []
         count = self.fmu.getInteger(count_ref)[0]
         step = 0
-        for _ in range(periods):
+        for period in range(periods):
             p_values = []
             for k in range(n):
                 self.fmu.setReal(inputs, [nodes[k], slopes[k]])
@@ -92,11 +94,30 @@ class Marcher:
             if trace:
                 tops.append(max(p_values))
                 bottoms.append(min(p_values))
-        run = {"sections": np.array(sections), "onsets": np.array(onsets), "h": h, "impacts": [int(i) for i in onsets]}
+            if until is not None and (period + 1) % LOOK == 0 and until(_run(sections, onsets, h)):
+                break
+        run = _run(sections, onsets, h)
         if trace:
             steps = np.array(steps)
             run.update(top=np.array(tops), bottom=np.array(bottoms), p=steps[:, 0], dp=steps[:, 1])
         return run
+
+
+#: Periods between two looks of :meth:`Marcher.march`'s ``until``.
+LOOK = 20
+
+
+def _run(sections: list, onsets: list, h: float) -> dict:
+    return {"sections": np.array(sections), "onsets": np.array(onsets), "h": h, "impacts": [int(i) for i in onsets]}
+
+
+def nudged(start, relative: float, amplitude: float) -> np.ndarray:
+    """``start`` moved by ``relative`` of itself; a start at rest (all zero), which that would not
+    move, by ``relative`` of ``amplitude`` (m) in both displacements, the gap between them unchanged."""
+    start = np.asarray(start, dtype=float)
+    if start.any():
+        return start * (1 + relative)
+    return start + relative * amplitude * np.array([1.0, 0.0, 1.0, 0.0])
 
 
 def reaches(run: dict, attractor: dict, omega: float, window: int = 40) -> bool:
@@ -127,15 +148,16 @@ def ends_as_labelled(marcher: Marcher, values: dict, omega: float, amplitude: fl
                      periods: int) -> bool:
     """Whether a start that a study labelled after ``periods`` periods ends on ``attractor`` when
     marched with fmpy alone (200 periods more); or else whether its fate hangs on the last bits: the
-    same start moved by 1e-12 of itself parts from it by 1e-3 of the state's size within ``periods``
-    (a chaotic transient, whose end no double-precision code predicts). False otherwise."""
+    same start moved by 1e-12 of itself (:func:`nudged`) parts from it by 1e-3 of the state's size
+    within ``periods`` (a chaotic transient, whose end no double-precision code predicts). False
+    otherwise."""
     start = np.asarray(start, dtype=float)
     run = marcher.march(values, omega, amplitude, start, periods + 200)
     if attractor["kind"] == "not periodic":
         return not settled(run, omega)
     if reaches(run, attractor, omega):
         return True
-    moved = marcher.march(values, omega, amplitude, start * (1 + 1e-12), periods)
+    moved = marcher.march(values, omega, amplitude, nudged(start, 1e-12, amplitude), periods)
     scale = np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])
     size = np.abs(run["sections"][:periods] * scale).max()
     return bool(np.abs((moved["sections"] - run["sections"][:periods]) * scale).max() > 1e-3 * size)

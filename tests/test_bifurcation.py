@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmpy_march import Marcher, settled
+from fmpy_march import Marcher, nudged, settled
 from fmu_host import assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
@@ -62,8 +62,9 @@ def test_the_fmu_checked_every_kind_of_motion_the_diagram_shows_and_none_disagre
 def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neighbour_through_the_fmu(diagram):
     """Issue 31: chaos is a claim that needs evidence. Every chaotic point's cloud persisted and its
     exponent's interval lies above 0; through the FMU marched with fmpy alone from the point's start,
-    the motion never settles over twice the budget, and a start moved by 1e-9 of itself parts from
-    it at a positive rate, to the motion's own size."""
+    the motion never settles over twice the budget, and a start moved by 1e-9 of itself (of ``Y``
+    in both displacements for a start at rest) parts from it at a positive rate, to the motion's own
+    size."""
     saved = json.loads((diagram / "points.json").read_text())
     points = [p for sweep in saved["sweeps"] for p in sweep["points"]]
     chaotic = [p for p in points if p["motion"] == "chaotic"]
@@ -82,7 +83,8 @@ def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neigh
         windows = [{"sections": run["sections"][k - 40:k]} for k in range(budget, 2 * budget + 1, 100)]
         assert not any(settled(w, point["omega"]) for w in windows)
         assert (run["onsets"][budget:] > 0).mean() > 0.1  # still impacting to the end
-        moved = marcher.march(values, point["omega"], point["amplitude_Y"], start * (1 + 1e-9), 100)
+        moved = marcher.march(values, point["omega"], point["amplitude_Y"], nudged(start, 1e-9, point["amplitude_Y"]),
+                              100)
         scale = np.array([1.0, 1.0 / point["omega"], 1.0, 1.0 / point["omega"]])
         gap = np.abs((moved["sections"] - run["sections"][:100]) * scale).max(axis=1)
         assert gap.max() > 1e-4
