@@ -164,9 +164,9 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     """March ``starts`` ((n, 4): ``p, p', q, q'``, free unless ``sides`` says otherwise) under
     ``drives`` (one, or one per group) to where each goes (see the module's text), on ``device``;
     the orbit finder's small ensembles march on the CPU. ``progress(done, total)`` is called after
-    each block. With ``measured`` False, the starts
-    undecided at the budget are not measured (a cloud wanted only for when its starts resolve):
-    they come back with NaN measures, no samples, and their start as ``final``."""
+    each block. With ``measured`` False, the starts undecided at the budget are not measured (a
+    cloud wanted only for when its starts resolve): they come back with NaN measures, no samples,
+    and their start as ``final``."""
     drives = [drives] if isinstance(drives, HarmonicHold) else list(drives)
     starts = np.asarray(starts, float)
     n = len(starts)
