@@ -91,6 +91,18 @@ def starts(count: int, omega: float) -> np.ndarray:
     return np.stack([p0, rng.uniform(-span * omega, span * omega, count), p0, np.zeros(count)], axis=1)
 
 
+def tables_for(drive) -> "kernel.Tables":
+    """The benchmark's damper and ``drive`` packed for the kernel."""
+    return kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+
+
+def whole_state(states: np.ndarray) -> np.ndarray:
+    """The kernel's state (7, n) of free starts ``states`` ((n, 4)), the voltages zero."""
+    state = np.zeros((7, len(states)))
+    state[:4] = states.T
+    return state
+
+
 def with_transfers(device: str, states: np.ndarray, drive, periods: int) -> dict:
     """Start-periods a second of ``Ensemble.advance`` (a fresh ensemble each march, after a
     first period that loads the compiled code)."""
@@ -114,10 +126,7 @@ def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat", 
     ``march``, the nested loops) from ``namespace`` (the kernel's GPU target when None): the arrays
     on the GPU before the clock starts, the launch timed to the device's synchronisation, after one
     untimed launch that compiles it. With ``keep``, also the sections of the last march."""
-    n = len(states)
-    state = np.zeros((7, n))
-    state[:4] = states.T
-    return resident_state(state, np.zeros(n, bool), drive, periods, name, namespace, keep)
+    return resident_state(whole_state(states), np.zeros(len(states), bool), drive, periods, name, namespace, keep)
 
 
 def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, name: str = "march_flat",
@@ -126,7 +135,7 @@ def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, n
     ``failed`` flags."""
     from numba import cuda
 
-    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    tables = tables_for(drive)
     n = state.shape[1]
     host = (True, np.ascontiguousarray(state), failed.copy(), np.zeros(n, np.int64)) + tables.arguments() + (
         np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
@@ -154,10 +163,9 @@ def orderings(states: np.ndarray, drive, periods: int, transients: list) -> list
     warps of threads whose work is alike (a warp executes the union of its threads' branches). Each
     order's sections, put back in the starts' order, must be the first order's bit for bit: a
     trajectory's march does not depend on its neighbours."""
-    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    tables = tables_for(drive)
     n = len(states)
-    state, failed, groups = np.zeros((7, n)), np.zeros(n, bool), np.zeros(n, np.int64)
-    state[:4] = states.T
+    state, failed, groups = whole_state(states), np.zeros(n, bool), np.zeros(n, np.int64)
     rows, marched = [], 0
     for transient in transients:
         while marched < transient:  # in blocks, whose sections fit in memory at any size
@@ -192,10 +200,9 @@ def long_march(states: np.ndarray, drive, total: int, block: int, sort: bool) ->
     put back in the starts' order, are returned for the bits to be compared."""
     from numba import cuda
 
-    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    tables = tables_for(drive)
     n = len(states)
-    state = np.zeros((7, n))
-    state[:4] = states.T
+    state = whole_state(states)
     failed, ids = np.zeros(n, bool), np.arange(n)
     device = [cuda.to_device(a) for a in (state, failed, np.zeros(n, np.int64)) + tables.arguments()]
     outputs = [cuda.device_array(shape, dtype) for shape, dtype in (((block, n, 4), float), ((block, n), float),
@@ -288,10 +295,9 @@ def nudged_twin(states: np.ndarray, drive, periods: int) -> dict:
     """The starts marched on the CPU with a last-bit difference put in at every period: ``p, p',
     q, q'`` moved to the next float at each section. Sections and onsets as ``Ensemble.advance``
     gives them."""
-    tables = kernel.Tables(BatchModel.of(Parameters(**VALUES)), [drive])
+    tables = tables_for(drive)
     n = len(states)
-    state, failed, groups = np.zeros((7, n)), np.zeros(n, bool), np.zeros(n, np.int64)
-    state[:4] = states.T
+    state, failed, groups = whole_state(states), np.zeros(n, bool), np.zeros(n, np.int64)
     rows = []
     for _ in range(periods):
         state[:4] = np.nextafter(state[:4], np.inf)
