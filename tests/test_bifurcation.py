@@ -27,7 +27,7 @@ FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
 def diagram(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bifurcation")
     assert run_cli("bifurcation", "--ratio-min", 0.98, "--ratio-max", 1.02, "--count", 3, "--max-cycles", 400,
-                   "--jobs", 2, "--out", out, "--fmu", FMU) == 0
+                   "--jobs", 3, "--out", out, "--fmu", FMU) == 0
     return out
 
 
@@ -166,6 +166,20 @@ def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, a
     out = tmp_path / "out"
     assert_refused(capsys, "bifurcation", argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "bifurcation.nc").exists()
+
+
+def test_the_diagram_takes_every_worker_it_is_given(tmp_path, monkeypatch):
+    """The chains keep two workers busy; the clouds and the FMU's checks are tasks of their own, so
+    ``--jobs 3`` gives the diagram three (it took two at most before)."""
+    from piezo_fmu_harness import checks
+
+    asked = []
+    make_backend = checks.make_backend
+    monkeypatch.setattr(checks, "make_backend", lambda args, model, unzipdir, jobs: asked.append(jobs) or make_backend(
+        args, model, unzipdir, jobs))
+    assert run_cli("bifurcation", "--ratio-min", 1.1, "--ratio-max", 1.2, "--count", 2, "--max-cycles", 40,
+                   "--confirm", 0, "--jobs", 3, "--no-progress", "--out", tmp_path, "--fmu", FMU) == 0
+    assert asked == [3]
 
 
 @pytest.mark.parametrize("quiet", [False, True])

@@ -58,8 +58,9 @@ def command(args) -> int:
         if (folder / "bifurcation.nc").exists() and not args.force:
             raise UsageError(f"--out {folder}: holds a bifurcation diagram already; give --force to replace it")
         folder.mkdir(parents=True, exist_ok=True)
+        # every worker: the two chains take two, the clouds and the FMU's checks are tasks of their own
         backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
-                   else make_backend(args, model, unzipdir, min(jobs, 2)))
+                   else make_backend(args, model, unzipdir, jobs))
         try:
             sweeps, wall = study.run(spec, backend, args.device, False if args.no_progress else None)
             checked = study.checks(spec, sweeps, backend, count, seed)
