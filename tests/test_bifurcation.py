@@ -51,6 +51,21 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
     assert (diagram / "bifurcation.png").stat().st_size > 0
 
 
+def test_the_summary_gives_the_work_of_the_sweeps_and_of_the_clouds(diagram):
+    """``summary.json`` says where the start-periods went: a point on no orbit marched its own
+    trajectory through the budget, and a cloud that persisted kept all its companions to the end."""
+    summary = json.loads((diagram / "summary.json").read_text())
+    points = [p for sweep in json.loads((diagram / "points.json").read_text())["sweeps"] for p in sweep["points"]]
+    budget, work = summary["budget_periods"], summary["start_periods"]
+    unresolved = [p for p in points if p["motion"] != "periodic"]
+    persisted = [p for p in unresolved if p["transients"]["persists"]]
+    assert persisted and work["clouds"] == sum(p["cloud_start_periods"] for p in unresolved)
+    assert all(p["cloud_start_periods"] >= CLOUD * budget for p in persisted)
+    assert all(p["start_periods"] >= budget for p in unresolved)
+    assert work["sweeps"] == sum(p["start_periods"] for p in points)
+    assert summary["cpu_s"] == pytest.approx(sum(p["cpu_seconds"] for p in points))
+
+
 def test_the_fmu_checked_every_kind_of_motion_the_diagram_shows_and_none_disagreed(diagram):
     summary = json.loads((diagram / "summary.json").read_text())
     checks = summary["fmu_checks"]

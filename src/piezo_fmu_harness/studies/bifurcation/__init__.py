@@ -70,7 +70,9 @@ def command(args) -> int:
         instance.free()
         discard(unzipdir)
     report = study.write(spec, sweeps, folder, wall, checked)
-    print(f"{PROG} bifurcation: {report['points']} points in {wall:.1f} s")
+    work = report["start_periods"]
+    print(f"{PROG} bifurcation: {report['points']} points in {wall:.1f} s ({work['sweeps'] + work['clouds']:,} "
+          f"start-periods, {work['clouds']:,} of them in the clouds)")
     for direction, classes in report["classes"].items():
         print(f"  sweep {direction}: " + "; ".join(f"{kind} {c['count']}" for kind, c in classes.items()))
     checks = report["fmu_checks"]

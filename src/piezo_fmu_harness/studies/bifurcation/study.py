@@ -31,7 +31,8 @@ diagram gives (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` list
 
 Files: ``bifurcation.nc`` (dims direction x omega x sample; the periods each point took and its
 cloud's lifetime), ``bifurcation.csv`` (a row a sample), ``points.json`` (the damper's values and each sweep's points: the
-start, the motion, the exponent's interval, the cloud's survival fit), ``summary.json`` (the budget,
+start, the motion, the exponent's interval, the cloud's survival fit, the start-periods of each),
+``summary.json`` (the budget, the start-periods of the sweeps and of the clouds and the CPU seconds,
 the classes and where, the checks), ``bifurcation.png``.
 
 This study reads the simulation core's batch engine besides the FMU, which checks it: the one
@@ -114,6 +115,7 @@ def frequency(instance, spec: dict, direction: str, number: int, state: list, si
         point.update(status="error", motion="error", attractor=None, samples=[], impacts_per_cycle=None,
                      order=None, amplitude=None, lyapunov_exponent=None)
     point["cpu_seconds"] = time.process_time() - begin
+    point["start_periods"] = int(settled.cycles)
     if label != -2:
         state, side = [float(v) for v in settled.final[0]], float(settled.final_sides[0])
     return {"point": point, "record": record, "next": (state, side)}
@@ -132,7 +134,7 @@ def companions(instance, spec: dict, direction: str, number: int, state: list, s
                      sides=[side] * len(starts), measured=False)
     records = [{"label": int(label), "periods": int(periods)}
                for label, periods in zip(settled.labels.tolist(), settled.periods.tolist())]
-    return {"records": records, "cpu_seconds": time.process_time() - begin}
+    return {"records": records, "cpu_seconds": time.process_time() - begin, "start_periods": int(settled.cycles)}
 
 
 def _drive(spec: dict, direction: str, number: int):
@@ -162,7 +164,7 @@ def judged(point: dict, record: dict, clouded: dict) -> dict:
                                                      else "undecided"},
             "transients": counts(fit) if fit else None, "lifetime": fit.lifetime if fit else None,
             "persists": bool(fit.persists) if fit else None,
-            "cpu_seconds": point["cpu_seconds"] + clouded["cpu_seconds"]}
+            "cpu_seconds": point["cpu_seconds"] + clouded["cpu_seconds"], "cloud_start_periods": clouded["start_periods"]}
 
 
 def follow(spec: dict):
@@ -293,11 +295,18 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
                "parameters": json.dumps(spec.values), "settings": json.dumps(asdict(spec.settings))})
 
 
-def summarize(ds, wall: float, checked: list[dict]) -> dict:
+def summarize(ds, wall: float, checked: list[dict], sweeps: list[dict]) -> dict:
+    """The summary: the wall time and the work (start-periods marched by the sweeps' own trajectories
+    and by the clouds, with Newton's and the measures'; the CPU seconds of the points), the classes
+    and their bands, the FMU's checks."""
     ratios = ds["ratio"].values
+    points = [p for s in sweeps for p in s["points"]]
     verdicts = [c["verdict"] for c in checked]
     undecided = np.char.startswith(ds["motion"].values.astype(str), "undecided")
-    report = {"wall_s": wall, "points": int(ds["motion"].size), "budget_periods": int(ds.attrs["budget_periods"]),
+    report = {"wall_s": wall, "cpu_s": sum(p["cpu_seconds"] for p in points),
+              "start_periods": {"sweeps": sum(p["start_periods"] for p in points),
+                                "clouds": sum(p.get("cloud_start_periods", 0) for p in points)},
+              "points": int(ds["motion"].size), "budget_periods": int(ds.attrs["budget_periods"]),
               "undecided": int(undecided.sum()), "classes": {},
               "fmu_checks": {"checked": len(checked), "agree": verdicts.count("agrees"),
                              "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
@@ -318,7 +327,7 @@ def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float, ch
     frame = ds[["p_section"]].to_dataframe().dropna().reset_index()
     frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),
                 on=["direction", "omega"]).to_csv(folder / "bifurcation.csv", index=False)
-    report = summarize(ds, wall, checked)
+    report = summarize(ds, wall, checked, sweeps)
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     (folder / "points.json").write_text(json.dumps({"values": spec.values, "sweeps": sweeps}) + "\n")
     draw(ds, folder / "bifurcation.png")
