@@ -240,7 +240,9 @@ def test_without_a_usable_python_instantiation_fails_with_what_was_tried_and_wha
     assert time.perf_counter() - started < 30
     assert completed.returncode == 1  # an exit, not a crash
     assert completed.stdout == ""
-    message, failure = completed.stderr.splitlines()
+    lines = completed.stderr.splitlines()
+    assert len(lines) == 2, completed.stderr  # the refusal and the host's failure, nothing else
+    message, failure = lines
     assert message.startswith("[native_host] logStatusError (Error): piezo-fmu: no Python for this FMU: ")
     assert said in message
     assert message.endswith(r"Set PIEZO_FMU_PYTHON=C:\path\to\python.exe, a Python 3 that can import numpy "
