@@ -157,10 +157,15 @@ def free_for_ever(model: BatchModel, orbit: LinearOrbit, states: np.ndarray, sid
 
 class OrbitFinder:
     """Newton, verification and multipliers for one damper on the batch engine: ``drives`` the
-    forcings (an orbit belongs to one, its ``group``), ``tolerance`` (m) the steady state's."""
+    forcings (an orbit belongs to one, its ``group``), ``tolerance`` (m) the steady state's.
 
-    def __init__(self, model: BatchModel, drives: list, tolerance, device: str = "cpu"):
-        self.model, self.drives, self.device = model, list(drives), device
+    Its ensembles march on the CPU, whatever device a study's starts march on: Newton's seeds, their
+    neighbours and the checks of an orbit are thousands of ensembles of a few trajectories, and on a
+    GPU each launch costs milliseconds of transfers and latency (13,235 of them were 60 s of an 82 s
+    ``settle`` on an H200; docs/benchmarks.md)."""
+
+    def __init__(self, model: BatchModel, drives: list, tolerance):
+        self.model, self.drives = model, list(drives)
         self.tolerance = np.broadcast_to(np.asarray(tolerance, float), (len(self.drives),))
         self.cycles = 0  # start-periods marched by this finder
         self._tables = None
@@ -186,7 +191,7 @@ class OrbitFinder:
             record.update(top=np.full((periods, len(states)), np.nan), bottom=np.full((periods, len(states)), np.nan))
         if valid.any():
             ens = Ensemble(self.model.params, self.drives, states[valid], groups[valid], sides[valid],
-                           device=self.device, model=self.model, tables=self.tables)
+                           device="cpu", model=self.model, tables=self.tables)
             out = ens.advance(periods, observe=observe)
             self.cycles += periods * int(valid.sum())
             for name, values in out.items():

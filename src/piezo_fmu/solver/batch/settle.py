@@ -173,10 +173,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
     groups = np.zeros(n, int) if groups is None else np.asarray(groups, int)
     model = BatchModel.of(params)
     tolerance = np.array([settings.tolerance * max(d.amplitude, 1e-300) for d in drives])
-    # Newton's seeds, their neighbours and the checks of an orbit make thousands of small ensembles: on
-    # a GPU each launch costs milliseconds of transfers and latency (13,235 of them were 60 s of an
-    # 82 s settle on an H200), so they march on the CPU whatever ``device`` (docs/benchmarks.md)
-    finder = OrbitFinder(model, drives, tolerance, "cpu")
+    finder = OrbitFinder(model, drives, tolerance)  # on the CPU whatever ``device`` (its small ensembles)
     linear = [linear_orbit(model, d) for d in drives]
     scales = np.array([scale_of(d) for d in drives])
     state = _State(n, settings)
