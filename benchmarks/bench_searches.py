@@ -1,0 +1,172 @@
+"""What the compiled kernel's event searches cost (issue 32): the kernel against itself with every
+evaluation its searches make done twice, side by side in one run.
+
+    python benchmarks/bench_searches.py [--ratios R,R,...] [--starts N] [--transient P] [--periods P] [--rounds K]
+                                        [--points DIAGRAM/points.json]
+
+A search for a contact onset or a separation steps towards the event (``kernel_phases.locate``),
+evaluating the event functions at each step: free flight's closed form (an ``exp`` and a ``sincos``)
+or the contact's modes (an ``exp`` and a ``sincos`` a mode). Three versions of the kernel march the
+same starts: the kernel as it is; the kernel whose searches evaluate the contact's modes twice at
+each step; and the kernel whose searches evaluate free flight twice. The second evaluation is made
+at ``t + 0 x`` (the first one's values), so the compiler can neither drop it nor run both at once,
+and its result replaces the first: the motion is the same bit for bit (``same_bits`` says so). The
+time a version adds is what those evaluations cost, and the sum of the two is the most that any
+other event location could save, were its searches to cost nothing at all.
+
+Each version runs in a process of its own, with a numba cache of its own in a temporary folder
+(the versions differ in code that numba's cache does not tell apart), the processes in turn,
+``--rounds`` times; each figure is the median over the rounds of the fastest of three marches a
+process. The starts: ``--starts`` random starts (``bench_gpu.starts``) at each ratio to
+``sqrt(K/M)``, or with ``--points`` the cloud of a bifurcation diagram's chaotic point nearest each
+ratio (its start and the first of its companions, as the diagram marches them: ``piezo-fmu
+bifurcation`` writes ``points.json``), marched ``--transient`` periods first, then timed over
+``--periods``, one thread (``NUMBA_NUM_THREADS=1``), unobserved, as the studies march them.
+
+Prints one JSON object: the functions each version's searches call (``searches``); for each ratio,
+ns a start-period of each version, the share the doubled evaluations add (``contact_share``,
+``free_share``), their sum (``searches_share``, the bound above), ``same_bits`` and the contact
+onsets a period. Exits 1 when a version's motion differs from the kernel's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+VERSIONS = ("kernel", "contact", "free")
+#: The frequencies measured: chaotic motion at 0.877 and 1.0 (about 3 impacts a period), 0.553 and
+#: 1.48 (about 2 and 1.5), and 1.9 (one impact every other period).
+RATIOS = (0.553, 0.877, 1.0, 1.48, 1.9)
+
+
+def contact_twice(s, c, work, t):
+    """``contact_value`` evaluated twice, the second time at the same instant after the first."""
+    g, dg = contact_value_once(s, c, work, t)  # noqa: F821 (a global of the compiled namespace)
+    return contact_value_once(s, c, work, t + 0.0 * (g + dg))  # noqa: F821
+
+
+def free_twice(c, work, u, du, w, dw, t):
+    """``free_values`` evaluated twice, the second time at the same instant after the first."""
+    g_a, g_b, dg_a, dg_b, tol = free_values_once(c, work, u, du, w, dw, t)  # noqa: F821
+    return free_values_once(c, work, u, du, w, dw, t + 0.0 * (g_a + g_b + dg_a + dg_b + tol))  # noqa: F821
+
+
+def patch(version: str) -> None:
+    """Make the kernel this process compiles the ``version`` (before its first compilation)."""
+    from piezo_fmu.solver.batch import kernel
+    from piezo_fmu.solver.batch import kernel_phases as phases
+
+    if version == "kernel":
+        return
+    name, twice = {"contact": ("contact_value", contact_twice), "free": ("free_values", free_twice)}[version]
+    setattr(phases, name + "_once", getattr(phases, name))
+    setattr(phases, name, twice)
+    position = kernel.FUNCTIONS.index(name)
+    kernel.FUNCTIONS = kernel.FUNCTIONS[:position] + (name + "_once",) + kernel.FUNCTIONS[position:]
+
+
+def workload(ratio: float, count: int, points: str | None) -> tuple:
+    """``(params, drive, starts, sides)`` at ``ratio``: random starts, or the cloud of the chaotic
+    point of a bifurcation diagram's ``points.json`` nearest to ``ratio``."""
+    sys.path.insert(0, str(HERE))
+    from bench_gpu import VALUES, W_N, Y, starts
+
+    from piezo_fmu import Parameters
+    from piezo_fmu.solver.batch import HarmonicHold
+
+    if points is None:
+        omega = ratio * W_N
+        return Parameters(**VALUES), HarmonicHold(omega, Y), starts(count, omega), None
+    from piezo_fmu_harness.studies.bifurcation.study import cloud
+
+    diagram = json.loads(Path(points).read_text())
+    chaotic = [p for sweep in diagram["sweeps"] for p in sweep["points"] if p["motion"] == "chaotic"]
+    if not chaotic:
+        raise SystemExit(f"bench_searches: --points {points}: no chaotic point")
+    point = min(chaotic, key=lambda p: abs(p["ratio"] - ratio))
+    states = np.vstack([point["start"], cloud(point["start"], point["omega"], point["amplitude_Y"], 0)])[:count]
+    return (Parameters(**diagram["values"]), HarmonicHold(point["omega"], point["amplitude_Y"]), states,
+            [point["start_side"]] * len(states))
+
+
+def child(version: str, ratios: list, count: int, transient: int, periods: int, points: str | None) -> dict:
+    """Marches of the ``version`` at each ratio, in this process (see the module's text)."""
+    patch(version)
+    from piezo_fmu.solver.batch import Ensemble, kernel
+
+    compiled = kernel.target("cpu")
+    out = {"searches": [compiled[name].py_func.__code__.co_name for name in ("contact_value", "free_values")]}
+    for ratio in ratios:
+        params, drive, starts, sides = workload(ratio, count, points)
+        ens = Ensemble(params, drive, starts, sides=sides)
+        if transient:
+            ens.advance(transient, observe=False)
+        state, sides = ens.states, ens.sides
+        times, digest, impacts = [], None, None
+        for _ in range(3):
+            again = Ensemble(params, drive, state, sides=sides)
+            begin = time.perf_counter()
+            marched = again.advance(periods, observe=False)
+            times.append(time.perf_counter() - begin)
+            digest = hashlib.sha256(marched["sections"].tobytes() + marched["impacts"].tobytes()).hexdigest()
+            impacts = float(np.mean(marched["impacts"]))
+        out[str(ratio)] = {"ns": 1e9 * min(times) / (count * periods), "digest": digest, "impacts": impacts}
+    return out
+
+
+def run_child(version: str, cache: Path, args) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache / version), NUMBA_NUM_THREADS="1")
+    env["PYTHONPATH"] = os.pathsep.join([str(HERE.parent / "src"), env.get("PYTHONPATH", "")])
+    command = [sys.executable, __file__, "--child", version, "--ratios", ",".join(map(str, args.ratios)),
+               "--starts", str(args.starts), "--transient", str(args.transient), "--periods", str(args.periods)]
+    if args.points:
+        command += ["--points", args.points]
+    done = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+    if done.returncode:
+        raise SystemExit(f"bench_searches: the {version} version failed:\n{done.stderr}")
+    return json.loads(done.stdout)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ratios", type=lambda text: [float(x) for x in text.split(",")], default=list(RATIOS))
+    parser.add_argument("--starts", type=int, default=80)
+    parser.add_argument("--transient", type=int, default=200)
+    parser.add_argument("--periods", type=int, default=300)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--points", help="a bifurcation diagram's points.json: its chaotic points' clouds")
+    parser.add_argument("--child", choices=VERSIONS)
+    args = parser.parse_args(argv)
+    if args.child:
+        print(json.dumps(child(args.child, args.ratios, args.starts, args.transient, args.periods, args.points)))
+        return 0
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="bench-searches-") as folder:
+        runs = [{version: run_child(version, Path(folder), args) for version in VERSIONS} for _ in range(args.rounds)]
+    result = {"load_average_before": load, "points": args.points, "starts": args.starts,
+              "transient": args.transient, "periods": args.periods, "rounds": args.rounds,
+              "searches": {version: runs[0][version]["searches"] for version in VERSIONS}, "ratios": {}}
+    for ratio in map(str, args.ratios):
+        ns = {version: float(np.median([run[version][ratio]["ns"] for run in runs])) for version in VERSIONS}
+        digests = {run[version][ratio]["digest"] for run in runs for version in VERSIONS}
+        contact, free = (ns[v] / ns["kernel"] - 1.0 for v in ("contact", "free"))
+        result["ratios"][ratio] = {"ns_per_start_period": ns, "contact_share": contact, "free_share": free,
+                                   "searches_share": contact + free, "same_bits": len(digests) == 1,
+                                   "impacts_per_period": runs[0]["kernel"][ratio]["impacts"]}
+    print(json.dumps(result, indent=2))
+    return 0 if all(r["same_bits"] for r in result["ratios"].values()) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
