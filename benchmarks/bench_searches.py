@@ -148,6 +148,14 @@ def main(argv=None) -> int:
     parser.add_argument("--points", help="a bifurcation diagram's points.json: its chaotic points' clouds")
     parser.add_argument("--child", choices=VERSIONS)
     args = parser.parse_args(argv)
+    for name, value, least in (("--starts", args.starts, 1), ("--transient", args.transient, 0),
+                               ("--periods", args.periods, 1), ("--rounds", args.rounds, 1)):
+        if value < least:
+            parser.error(f"{name} = {value} is out of range; allowed range [{least}, inf)")
+    if not args.ratios or min(args.ratios) <= 0.0:
+        parser.error(f"--ratios = {args.ratios} is out of range; allowed: one ratio or more, each in (0, inf)")
+    if args.points and not Path(args.points).is_file():
+        parser.error(f"--points = {args.points}: no such file; allowed: the points.json that piezo-fmu bifurcation writes")
     if args.child:
         print(json.dumps(child(args.child, args.ratios, args.starts, args.transient, args.periods, args.points)))
         return 0
