@@ -4,29 +4,31 @@ evaluation its searches make done twice, side by side in one run.
     python benchmarks/bench_searches.py [--ratios R,R,...] [--starts N] [--transient P] [--periods P] [--rounds K]
                                         [--points DIAGRAM/points.json]
 
-A search for a contact onset or a separation steps towards the event (``kernel_phases.locate``),
-evaluating the event functions at each step: free flight's closed form (an ``exp`` and a ``sincos``)
-or the contact's modes (an ``exp`` and a ``sincos`` a mode). Three versions of the kernel march the
-same starts: the kernel as it is; the kernel whose searches evaluate the contact's modes twice at
-each step; and the kernel whose searches evaluate free flight twice. The second evaluation is made
-at ``t + 0 x`` (the first one's values), so the compiler can neither drop it nor run both at once,
-and its result replaces the first: the motion is the same bit for bit (``same_bits`` says so). The
-time a version adds is what those evaluations cost, and the sum of the two is the most that any
-other event location could save, were its searches to cost nothing at all.
+A search for a contact onset or a separation steps towards the event (``kernel_phases.locate``):
+at each step it evaluates the event functions, free flight's closed form (an ``exp`` and a
+``sincos``) or the contact's modes (an ``exp`` and a ``sincos`` a mode), and computes the next step
+(``safe_step``: a square root and a few operations for each function). Four versions of the kernel
+march the same starts: the kernel as it is, and the kernel whose searches do one of these twice at
+every step: evaluate the contact's modes (``contact``), evaluate free flight (``free``), compute the
+step (``steps``). The second is made after the first (through ``+ 0 x`` its values), so the
+compiler can neither drop it nor run both at once, and its result replaces the first: the motion is
+the same bit for bit (``same_bits`` says so). The time a version adds is what that work costs; the
+sum of the three is what the searches' work costs, bar their loop's own branches: the most another
+event location could save, were its searches to cost nothing at all.
 
 Each version runs in a process of its own, with a numba cache of its own in a temporary folder
 (the versions differ in code that numba's cache does not tell apart), the processes in turn,
 ``--rounds`` times; each figure is the median over the rounds of the fastest of three marches a
 process. The starts: ``--starts`` random starts (``bench_gpu.starts``) at each ratio to
 ``sqrt(K/M)``, or with ``--points`` the cloud of a bifurcation diagram's chaotic point nearest each
-ratio (its start and the first of its companions, as the diagram marches them: ``piezo-fmu
+ratio (its start and up to ``--starts - 1`` companions, made as the diagram makes them: ``piezo-fmu
 bifurcation`` writes ``points.json``), marched ``--transient`` periods first, then timed over
 ``--periods``, one thread (``NUMBA_NUM_THREADS=1``), unobserved, as the studies march them.
 
 Prints one JSON object: the functions each version's searches call (``searches``); for each ratio,
-ns a start-period of each version, the share the doubled evaluations add (``contact_share``,
-``free_share``), their sum (``searches_share``, the bound above), ``same_bits`` and the contact
-onsets a period. Exits 1 when a version's motion differs from the kernel's.
+ns a start-period of each version, the share each doubled piece adds (``contact_share``,
+``free_share``, ``steps_share``), their sum (``searches_share``, the bound above), ``same_bits``
+and the contact onsets a period. Exits 1 when a version's motion differs from the kernel's.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-VERSIONS = ("kernel", "contact", "free")
+VERSIONS = ("kernel", "contact", "free", "steps")
 #: The frequencies measured: chaotic motion at 0.877 and 1.0 (about 3 impacts a period), 0.553 and
 #: 1.48 (about 2 and 1.5), and 1.9 (one impact every other period).
 RATIOS = (0.553, 0.877, 1.0, 1.48, 1.9)
@@ -62,6 +64,13 @@ def free_twice(c, work, u, du, w, dw, t):
     return free_values_once(c, work, u, du, w, dw, t + 0.0 * (g_a + g_b + dg_a + dg_b + tol))  # noqa: F821
 
 
+def steps_twice(g, dg, bound):
+    """``safe_step`` computed twice, the second time after the first (through ``dg``, whose zero's
+    sign the step does not read)."""
+    step = safe_step_once(g, dg, bound)  # noqa: F821
+    return safe_step_once(g, dg + 0.0 * fmin(abs(step), 1.0), bound)  # noqa: F821
+
+
 def patch(version: str) -> None:
     """Make the kernel this process compiles the ``version`` (before its first compilation)."""
     from piezo_fmu.solver.batch import kernel
@@ -69,11 +78,14 @@ def patch(version: str) -> None:
 
     if version == "kernel":
         return
-    name, twice = {"contact": ("contact_value", contact_twice), "free": ("free_values", free_twice)}[version]
+    name, twice = {"contact": ("contact_value", contact_twice), "free": ("free_values", free_twice),
+                   "steps": ("safe_step", steps_twice)}[version]
     setattr(phases, name + "_once", getattr(phases, name))
     setattr(phases, name, twice)
     position = kernel.FUNCTIONS.index(name)
     kernel.FUNCTIONS = kernel.FUNCTIONS[:position] + (name + "_once",) + kernel.FUNCTIONS[position:]
+    if name in kernel.INLINE:  # compiled into its callers, as the kernel's own
+        kernel.INLINE = kernel.INLINE + (name + "_once",)
 
 
 def workload(ratio: float, count: int, points: str | None) -> tuple:
@@ -106,7 +118,8 @@ def child(version: str, ratios: list, count: int, transient: int, periods: int, 
     from piezo_fmu.solver.batch import Ensemble, kernel
 
     compiled = kernel.target("cpu")
-    out = {"searches": [compiled[name].py_func.__code__.co_name for name in ("contact_value", "free_values")]}
+    out = {"searches": [compiled[name].py_func.__code__.co_name for name in ("contact_value", "free_values",
+                                                                             "safe_step")]}
     for ratio in ratios:
         params, drive, starts, sides = workload(ratio, count, points)
         ens = Ensemble(params, drive, starts, sides=sides)
@@ -168,9 +181,10 @@ def main(argv=None) -> int:
     for ratio in map(str, args.ratios):
         ns = {version: float(np.median([run[version][ratio]["ns"] for run in runs])) for version in VERSIONS}
         digests = {run[version][ratio]["digest"] for run in runs for version in VERSIONS}
-        contact, free = (ns[v] / ns["kernel"] - 1.0 for v in ("contact", "free"))
+        contact, free, steps = (ns[v] / ns["kernel"] - 1.0 for v in ("contact", "free", "steps"))
         result["ratios"][ratio] = {"ns_per_start_period": ns, "contact_share": contact, "free_share": free,
-                                   "searches_share": contact + free, "same_bits": len(digests) == 1,
+                                   "steps_share": steps, "searches_share": contact + free + steps,
+                                   "same_bits": len(digests) == 1,
                                    "impacts_per_period": runs[0]["kernel"][ratio]["impacts"]}
     print(json.dumps(result, indent=2))
     return 0 if all(r["same_bits"] for r in result["ratios"].values()) else 1

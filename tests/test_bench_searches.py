@@ -19,9 +19,10 @@ def test_the_searches_benchmark_doubles_each_evaluation_and_marches_the_same_mot
                             capture_output=True, text=True, timeout=600, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout)
-    assert report["searches"] == {"kernel": ["contact_value", "free_values"],
-                                  "contact": ["contact_twice", "free_values"],
-                                  "free": ["contact_value", "free_twice"]}
+    assert report["searches"] == {"kernel": ["contact_value", "free_values", "safe_step"],
+                                  "contact": ["contact_twice", "free_values", "safe_step"],
+                                  "free": ["contact_value", "free_twice", "safe_step"],
+                                  "steps": ["contact_value", "free_values", "steps_twice"]}
     assert set(report["ratios"]) == {"0.877", "1.2"}
     for ratio in report["ratios"].values():
         assert ratio["same_bits"] is True
