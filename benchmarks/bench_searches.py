@@ -2,7 +2,7 @@
 evaluation its searches make done twice, side by side in one run.
 
     python benchmarks/bench_searches.py [--ratios R,R,...] [--starts N] [--transient P] [--periods P] [--rounds K]
-                                        [--points DIAGRAM/points.json]
+                                        [--points DIAGRAM/points.json] [--cache DIR]
 
 A search for a contact onset or a separation steps towards the event (``kernel_phases.locate``):
 at each step it evaluates the event functions, free flight's closed form (an ``exp`` and a
@@ -17,7 +17,8 @@ sum of the three is what the searches' work costs, bar their loop's own branches
 event location could save, were its searches to cost nothing at all.
 
 Each version runs in a process of its own, with a numba cache of its own in a temporary folder
-(the versions differ in code that numba's cache does not tell apart), the processes in turn,
+(the versions differ in code that numba's cache does not tell apart; ``--cache DIR`` keeps them
+there, a folder a version, for the next run), the processes in turn,
 ``--rounds`` times; each figure is the median over the rounds of the fastest of three marches a
 process. The starts: ``--starts`` random starts (``bench_gpu.starts``) at each ratio to
 ``sqrt(K/M)``, or with ``--points`` the cloud of a bifurcation diagram's chaotic point nearest each
@@ -159,6 +160,7 @@ def main(argv=None) -> int:
     parser.add_argument("--periods", type=int, default=300)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--points", help="a bifurcation diagram's points.json: its chaotic points' clouds")
+    parser.add_argument("--cache", help="a folder for the versions' numba caches, kept (default: a temporary one)")
     parser.add_argument("--child", choices=VERSIONS)
     args = parser.parse_args(argv)
     for name, value, least in (("--starts", args.starts, 1), ("--transient", args.transient, 0),
@@ -174,7 +176,8 @@ def main(argv=None) -> int:
         return 0
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench-searches-") as folder:
-        runs = [{version: run_child(version, Path(folder), args) for version in VERSIONS} for _ in range(args.rounds)]
+        cache = Path(args.cache) if args.cache else Path(folder)
+        runs = [{version: run_child(version, cache, args) for version in VERSIONS} for _ in range(args.rounds)]
     result = {"load_average_before": load, "points": args.points, "starts": args.starts,
               "transient": args.transient, "periods": args.periods, "rounds": args.rounds,
               "searches": {version: runs[0][version]["searches"] for version in VERSIONS}, "ratios": {}}
