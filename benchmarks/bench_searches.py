@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # bench_gpu's starts and damper, shared with bench_batch.py
 VERSIONS = ("kernel", "contact", "free", "steps")
 #: The frequencies measured: chaotic motion at 0.877 and 1.0 (about 3 impacts a period), 0.553 and
 #: 1.48 (about 2 and 1.5), and 1.9 (one impact every other period).
@@ -92,7 +93,6 @@ def patch(version: str) -> None:
 def workload(ratio: float, count: int, points: str | None) -> tuple:
     """``(params, drive, starts, sides)`` at ``ratio``: random starts, or the cloud of the chaotic
     point of a bifurcation diagram's ``points.json`` nearest to ``ratio``."""
-    sys.path.insert(0, str(HERE))
     from bench_gpu import VALUES, W_N, Y, starts
 
     from piezo_fmu import Parameters
