@@ -160,7 +160,6 @@ def test_up_and_down_sweeps_agree_away_from_jump_bands(impact_study):
 # -- backends and resume ---------------------------------------------------------------------------
 
 def test_dask_and_one_process_give_the_same_bits(tmp_path):
-    pytest.importorskip("distributed")
     study = ("frequency-response", "--set", "d=1", "--ratio-min", 0.9, "--ratio-max", 1.0, "--count", 2,
              "--fmu", FMU, "--no-progress")
     assert run_cli(*study, "--dask-local", "--jobs", 2, "--out", tmp_path / "dask") == 0

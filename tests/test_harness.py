@@ -173,7 +173,7 @@ def test_di_ls_through_the_harness_does_not_depend_on_the_communication_step(fmu
 
 
 def test_dask_backend_gives_the_results_of_the_process_pool(pool_sweep, fmu, tmp_path):
-    distributed = pytest.importorskip("distributed")
+    import distributed
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster:
         assert run_cli("sweep", *GRID, "--stop-time", SWEEP_STOP, "--scheduler", cluster.scheduler_address,

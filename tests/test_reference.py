@@ -322,12 +322,7 @@ def test_reference_records_contacts_and_metrics_as_model_md_defines_them():
 
 # ============================================================================ the core against it
 
-try:
-    from piezo_fmu import Simulator
-except ImportError:  # the core is not there yet
-    Simulator = None
-
-needs_core = pytest.mark.skipif(Simulator is None, reason="piezo_fmu.Simulator is not available")
+from piezo_fmu import Simulator  # noqa: E402 (after the reference's own checks, as the file reads)
 
 
 @lru_cache(maxsize=None)
@@ -370,7 +365,6 @@ def _describe(case: str) -> str:
 CORE_CASES = list(CASES)
 
 
-@needs_core
 @pytest.mark.parametrize("case", CORE_CASES)
 def test_core_impact_count_equals_reference(case):
     ref, sim = reference_case(case), core_case(case)
@@ -379,7 +373,6 @@ def test_core_impact_count_equals_reference(case):
     assert sim.metrics.impact_count == ref["impact_count"], _describe(case)
 
 
-@needs_core
 @pytest.mark.parametrize("case", CORE_CASES)
 def test_core_impact_times_and_sides_match_reference_within_1e_8_s(case):
     ref, sim = reference_case(case), core_case(case)
@@ -391,7 +384,6 @@ def test_core_impact_times_and_sides_match_reference_within_1e_8_s(case):
     assert len(sim.impacts) == ref["impact_count"], _describe(case)
 
 
-@needs_core
 @pytest.mark.parametrize("case", CORE_CASES)
 def test_core_impact_voltages_match_reference_within_1e_6_relative(case):
     ref, sim = reference_case(case), core_case(case)
@@ -404,7 +396,6 @@ def test_core_impact_voltages_match_reference_within_1e_6_relative(case):
     assert sim.metrics.P_ave == pytest.approx(ref["P_ave"], rel=2 * VOLTAGE_RTOL)
 
 
-@needs_core
 @pytest.mark.parametrize("case", CORE_CASES)
 def test_core_damping_inclination_matches_reference_within_1e_6_relative(case):
     ref, sim = reference_case(case), core_case(case)
@@ -413,7 +404,6 @@ def test_core_damping_inclination_matches_reference_within_1e_6_relative(case):
     assert rel <= DI_RTOL, f"DI core {sim.metrics.DI!r} ref {ref['DI']!r} (rel {rel:.3e})"
 
 
-@needs_core
 @pytest.mark.parametrize("overshoot,v", SHALLOW)
 def test_core_finds_shallow_contacts_like_the_reference(overshoot, v):
     """Contacts far shallower than any of the four cases (down to 0.1 nm): same count, onset
@@ -431,7 +421,6 @@ def test_core_finds_shallow_contacts_like_the_reference(overshoot, v):
 
 # -- the 30-digit reference ------------------------------------------------------------------------
 
-@needs_core
 def test_designed_case_matches_the_30_digit_reference_far_inside_the_issue_tolerances():
     """The designed case (well conditioned) against the exact flow of each phase at 30 digits
     (``exact_reference.py``): the core is exact to double rounding, so it must agree far inside
