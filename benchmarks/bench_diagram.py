@@ -1,13 +1,14 @@
 """Where the bifurcation diagram's time goes (issue 32): its sweeps in one process on one thread,
 the compiled kernel's time apart from the Python between its blocks.
 
-    python benchmarks/bench_diagram.py [--count N] [--max-cycles N] [--out DIR] [--bare]
+    python benchmarks/bench_diagram.py [--count N] [--max-cycles N] [--out DIR] [--fmu FILE] [--bare]
 
 Runs ``piezo-fmu bifurcation --jobs 1`` (the default diagram unless ``--count`` or
 ``--max-cycles`` say otherwise) with ``NUMBA_NUM_THREADS=1``, without the FMU's checks (they come
 after the sweeps and are not what ``--jobs`` shares out), and times every launch of the kernel and
 the pieces of ``settle`` that run between two blocks of marching. The run is the diagram itself:
-the same ``points.json`` as without the timers (the test checks it).
+the same ``points.json`` as without the timers (the test checks it). The batch engine is the
+FMU's copy (as for the command): ``--fmu`` names another build, to compare two side by side.
 
 Prints one JSON object: ``sweeps_s`` (the sweeps' wall, as ``summary.json``'s ``wall_s``),
 ``kernel_s`` (every launch of the kernel: the marching, and Newton's, the checks' and the
@@ -90,7 +91,7 @@ def instrument(timers: Timers) -> None:
         setattr(holder, name, timers.wrap(getattr(holder, name), name))
 
 
-def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = True) -> dict:
+def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = True, fmu: Path | None = None) -> dict:
     """The diagram's sweeps, timed (see the module's text); ``timed`` False runs it bare."""
     from piezo_fmu_harness.cli import main
     from piezo_fmu_harness.studies.bifurcation import study
@@ -108,6 +109,7 @@ def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = 
     argv = ["bifurcation", "--jobs", "1", "--out", str(out), "--force", "--no-progress"]
     argv += [] if count is None else ["--count", str(count)]
     argv += [] if max_cycles is None else ["--max-cycles", str(max_cycles)]
+    argv += [] if fmu is None else ["--fmu", str(fmu)]
     try:
         with contextlib.redirect_stdout(sys.stderr):  # the command's lines; stdout is the JSON's
             code = main(argv)
@@ -143,6 +145,8 @@ def main(argv=None) -> int:
     parser.add_argument("--count", type=int, help="frequencies a sweep (the command's default: 200)")
     parser.add_argument("--max-cycles", type=int, help="the budget of periods (the command's default: 1000)")
     parser.add_argument("--out", type=Path, help="where the diagram's files go (default: a temporary folder)")
+    parser.add_argument("--fmu", type=Path, help="the FMI 2.0 FMU whose copy of the batch engine marches (default: the "
+                                                 "installed one): two builds compared side by side")
     parser.add_argument("--bare", action="store_true", help="the diagram without the timers: their cost, by comparison")
     args = parser.parse_args(argv)
     if os.environ.get("NUMBA_NUM_THREADS", "1") != "1":
@@ -152,7 +156,7 @@ def main(argv=None) -> int:
     print(f"load average: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", file=sys.stderr)
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or Path(scratch) / "diagram"
-        result = measure(args.count, args.max_cycles, out, timed=not args.bare)
+        result = measure(args.count, args.max_cycles, out, timed=not args.bare, fmu=args.fmu)
     print(json.dumps(result, indent=2))
     return 0
 

@@ -53,6 +53,8 @@ def test_the_diagram_benchmark_times_the_diagram_itself_and_owns_each_launch_onc
 def test_the_diagram_benchmark_refuses_bad_options_naming_them(tmp_path):
     count = bench(tmp_path, "--count", "0")
     assert count.returncode == 2 and "--count 0" in count.stderr and "allowed range [2, inf)" in count.stderr
+    fmu = bench(tmp_path, "--count", "4", "--fmu", "missing.fmu")
+    assert fmu.returncode == 2 and "FMU not found at missing.fmu" in fmu.stderr
     threads = bench(tmp_path, "--count", "4", env={"NUMBA_NUM_THREADS": "2"})
     assert threads.returncode == 2 and "NUMBA_NUM_THREADS = '2'" in threads.stderr
     assert "allowed: unset or '1'" in threads.stderr
