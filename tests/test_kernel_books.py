@@ -70,3 +70,69 @@ def test_the_compiled_distances_to_an_orbit_are_numpys(seed):
         assert np.isnan(expected[0]).any()
         assert np.array_equal(got[0], expected[0], equal_nan=True)
         assert np.array_equal(got[1], expected[1])
+
+
+def numpy_first_orders(shrinking, impacts, sides):
+    """``settle._find_orbits``'s choice of each seed's order as it was written with numpy: the
+    orders in turn, each trajectory taken at the first that converges."""
+    sequence = 3 * impacts + (np.asarray(sides, np.int64) + 1)
+    chosen, taken = {}, set()
+    for k in np.flatnonzero(shrinking.any(axis=1)).tolist():
+        order = k + 1
+        converging = shrinking[k] & (sequence[order:] == sequence[:-order]).all(axis=0)
+        for j in np.flatnonzero(converging).tolist():
+            if j not in taken:
+                taken.add(j)
+                chosen.setdefault(order, []).append(j)
+    return chosen
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_choice_of_newtons_orders_is_numpys(seed):
+    """Impact and side sequences of period 1 to 4, some broken in one period, against returns that
+    shrink at several orders: each trajectory at its least order whose sequence repeats."""
+    rng = np.random.default_rng(seed)
+    span, n, most = 43, 400, 13
+    order = rng.integers(1, 5, n)
+    pattern = rng.integers(0, 3, (4, n)), rng.integers(-1, 2, (4, n))
+    t = np.arange(span)[:, None] % order[None, :]
+    impacts, sides = pattern[0][t, np.arange(n)], pattern[1][t, np.arange(n)]
+    broken = rng.random(n) < 0.2
+    impacts[rng.integers(0, span, n)[broken], np.flatnonzero(broken)] += 1
+    shrinking = rng.random((most, n)) < 0.3
+    books = kernel.target("cpu")
+    orders = books["converging_orders"](shrinking, impacts.astype(np.int64), sides.astype(np.int64))
+    got = {k: np.flatnonzero(orders == k).tolist() for k in np.unique(orders[orders > 0]).tolist()}
+    expected = numpy_first_orders(shrinking, impacts, sides)
+    assert len(expected) > 3 and list(got) == list(expected)
+    assert got == expected
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_proof_of_free_flight_is_numpys(seed):
+    """``free_for_ever`` on states inside, near and beyond its bounds, at rest or not, free or in
+    contact, some NaN: the compiled flags are numpy's, False where not asked."""
+    from piezo_fmu import Parameters
+    from piezo_fmu.solver.batch import HarmonicHold
+    from piezo_fmu.solver.batch.orbits import free_for_ever, linear_orbit
+    from piezo_fmu.solver.batch.phases import BatchModel
+
+    model = BatchModel.of(Parameters())
+    orbit = linear_orbit(model, HarmonicHold(1.25 * 1000**0.5, 1e-3))
+    rng = np.random.default_rng(seed)
+    n, hg = 4000, model.half_gap
+    p = orbit.nodes[0, 0] + rng.normal(scale=hg / 4, size=n)
+    dp = orbit.nodes[0, 1] + rng.normal(scale=hg * 2, size=n)
+    q = p + rng.uniform(-1.2 * hg, 1.2 * hg, n)
+    dq = np.where(rng.random(n) < 0.7, 0.0, rng.normal(size=n))
+    states = np.column_stack([p, dp, q, dq])
+    states[rng.random((n, 4)) < 0.01] = np.nan
+    sides = rng.choice([0.0, 0.0, 0.0, 1.0, -1.0], n)
+    asked = rng.random(n) < 0.8
+    expected = np.zeros(n, bool)
+    expected[asked] = free_for_ever(model, orbit, states[asked], sides[asked])
+    got = kernel.target("cpu")["free_for_ever_flags"](states, sides, asked, float(orbit.nodes[0, 0]),
+                                                      float(orbit.nodes[0, 1]), float(model.free.w2),
+                                                      float(orbit.low), float(orbit.high), float(hg))
+    assert 50 < expected.sum() < asked.sum() - 50
+    assert np.array_equal(got, expected)

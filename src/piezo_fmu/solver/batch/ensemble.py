@@ -96,13 +96,26 @@ class Ensemble:
             raise ValueError(f"device = {device!r} is not known; allowed values {DEVICES}")
         if device == "gpu" and (error := kernel.gpu_error()):
             raise ValueError(error)
-        self.device = device
-        self.model = model = model or BatchModel.of(params)
-        self.params = params
+        model = model or BatchModel.of(params)
         drives, states, group, sides, volts = checked(params, model, drives, states, group, sides, volts)
+        self._fill(params, model, tables or kernel.Tables(model, drives), drives, states, group, sides, volts, device)
+
+    @classmethod
+    def checked_by_caller(cls, params: Parameters, model: BatchModel, tables, drives: list, states: np.ndarray,
+                          group: np.ndarray, sides: np.ndarray) -> "Ensemble":
+        """An ensemble on the CPU of ``states`` ((n, 4) floats), ``group`` ((n,) int64) and ``sides``
+        ((n,) floats) that the caller has checked already, by a test at least as strict as
+        :func:`checked`'s, under ``drives`` (a list), with ``model`` and ``tables`` given: the orbit
+        finder's thousands of small ensembles, whose checks cost more than their marching."""
+        ensemble = cls.__new__(cls)
+        ensemble._fill(params, model, tables, drives, states, group, sides, np.zeros((2, len(states))), "cpu")
+        return ensemble
+
+    def _fill(self, params, model, tables, drives, states, group, sides, volts, device) -> None:
+        self.device, self.model, self.params = device, model, params
         self.drives, self.samples = drives, drives[0].samples
         self.n = n = states.shape[0]
-        self._tables = tables or kernel.Tables(model, drives)
+        self._tables = tables
         self._state = np.empty((7, n))
         self._state[:4], self._state[4], self._state[5:] = states.T, sides, volts
         self.failed = np.zeros(n, dtype=bool)

@@ -117,7 +117,9 @@ def _cpu() -> dict:
     serial = numba.njit(cache=True, error_model="numpy")
     drivers = {"march": (_march_cpu, parallel), "march_flat": (_march_flat_cpu, parallel),
                "separate": (_separate_cpu, parallel), "largest4": (books.largest4, inline),
-               "shrinking_returns": (books.shrinking_returns, serial), "orbit_distances": (books.orbit_distances, serial)}
+               "shrinking_returns": (books.shrinking_returns, serial), "orbit_distances": (books.orbit_distances, serial),
+               "free_for_ever_flags": (books.free_for_ever_flags, serial),
+               "converging_orders": (books.converging_orders, serial)}
     namespace = _compiled(jit, drivers, inline)
     namespace.update(np=np, prange=numba.prange)
     return namespace

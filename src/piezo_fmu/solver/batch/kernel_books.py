@@ -1,6 +1,6 @@
 """The bookkeeping of :func:`.settle.settle` between two blocks of marching, compiled (issue 32):
-which trajectories' returns shrink (the seeds of Newton), and how far each section is from a known
-orbit.
+which trajectories' returns shrink (the seeds of Newton), how far each section is from a known
+orbit, and which trajectories are proved free for ever.
 
 ``settle`` looks at every open trajectory after each block: the returns over every order at the
 start and at the end of its history, and the distance of each of its sections to each known orbit.
@@ -12,6 +12,8 @@ numpy's rules for NaN (a largest or smallest value is NaN when any is; the first
 smallest), so they give numpy's answers bit for bit. They are compiled with the kernel, in its
 cache (:mod:`.kernel`), for the CPU only: the history is kept on the host.
 """
+
+import math
 
 from .kernel_phases import NAN, fmax
 
@@ -48,6 +50,29 @@ def shrinking_returns(sections, scale, open_, most, reach):
     return out
 
 
+def converging_orders(shrinking, impacts, sides):
+    """``(n,)``: the least order ``k + 1`` at which trajectory ``j``'s returns shrink
+    (``shrinking[k, j]``) and its history ((periods, n): ``impacts`` and ``sides``) repeats the
+    same impacts and sides at that lag in every period; 0 for none (``settle._find_orbits``)."""
+    most, n = shrinking.shape[0], shrinking.shape[1]
+    span = impacts.shape[0]
+    out = np.zeros(n, np.int64)  # noqa: F821 (a global of the compiled namespace)
+    for j in range(n):
+        for k in range(most):
+            if not shrinking[k, j]:
+                continue
+            order = k + 1
+            same = True
+            for t in range(order, span):
+                if impacts[t, j] != impacts[t - order, j] or sides[t, j] != sides[t - order, j]:
+                    same = False
+                    break
+            if same:
+                out[j] = order
+                break
+    return out
+
+
 def orbit_distances(sections, scale, points):
     """The scaled distance of each section ((periods, n, 4), scaled by ``scale`` (4,)) to the
     nearest of an orbit's scaled ``points`` ((m, 4)), and that point's index
@@ -72,3 +97,24 @@ def orbit_distances(sections, scale, points):
                     best, which = gap, i
             gaps[t, j], nearest[t, j] = best, which
     return gaps, nearest
+
+
+def free_for_ever_flags(sections, sides, open_, p0, dp0, w2, low, high, hg):
+    """:func:`.orbits.free_for_ever` for the ``open_`` ones of ``sections`` ((n, 4) at the section)
+    and ``sides`` ((n,)) against the linear orbit through ``(p0, dp0)`` bounded by ``low`` and
+    ``high`` (m): the same operations in the same order, False where not ``open_``. Called once a
+    block, for every open trajectory of a cloud: numpy's dozen small array operations and its
+    error state cost ten times the arithmetic."""
+    n = sections.shape[0]
+    out = np.zeros(n, np.bool_)  # noqa: F821 (a global of the compiled namespace)
+    root = math.sqrt(w2)
+    margin = 1e-9 * hg
+    inner, outer = hg - margin, -hg + margin
+    for j in range(n):
+        if not open_[j]:
+            continue
+        e, de = sections[j, 0] - p0, sections[j, 1] - dp0
+        reach = math.sqrt(de * de + w2 * e * e) / root
+        q = sections[j, 2]
+        out[j] = sides[j] == 0 and sections[j, 3] == 0.0 and q - low + reach < inner and q - high - reach > outer
+    return out

@@ -190,8 +190,9 @@ class OrbitFinder:
         if observe:
             record.update(top=np.full((periods, len(states)), np.nan), bottom=np.full((periods, len(states)), np.nan))
         if valid.any():
-            ens = Ensemble(self.model.params, self.drives, states[valid], groups[valid], sides[valid],
-                           device="cpu", model=self.model, tables=self.tables)
+            # ``valid`` is stricter than the ensemble's own check (no slack at the barriers)
+            ens = Ensemble.checked_by_caller(self.model.params, self.model, self.tables, self.drives, states[valid],
+                                             groups[valid].astype(np.int64), sides[valid])
             out = ens.advance(periods, observe=observe)
             self.cycles += periods * int(valid.sum())
             for name, values in out.items():
@@ -212,9 +213,9 @@ class OrbitFinder:
         jac = np.zeros((k, 4, 4))
         fx = np.zeros((k, 4))
         trial = x.copy()
+        amplitudes = np.array([self.drives[g].amplitude for g in groups])
         for _ in range(iterations + 1):
-            size = NEWTON_STEP * np.maximum(np.array([d.amplitude for d in np.array(self.drives)[groups]]),
-                                            np.abs(trial * scale).max(axis=1))
+            size = NEWTON_STEP * np.maximum(amplitudes, np.abs(trial * scale).max(axis=1))
             copies = [trial] + [trial + np.eye(4)[i] * (size / scale[:, i])[:, None] for i in range(4)]
             images = self.march(np.concatenate(copies), np.tile(sides, 5), np.tile(groups, 5), order)["sections"][-1]
             images = images.reshape(5, k, 4)

@@ -41,7 +41,7 @@ import numpy as np
 from .drive import HarmonicHold
 from .ensemble import Ensemble
 from .namespace import to_numpy
-from .orbits import LinearOrbit, Orbit, OrbitFinder, free_for_ever, linear_orbit, scale_of
+from .orbits import LinearOrbit, Orbit, OrbitFinder, linear_orbit, scale_of
 from .trajectories import empty_measures, measure
 from .phases import BatchModel
 
@@ -253,12 +253,16 @@ def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marc
         mask = (groups == g) & (state.labels[ids] == -1)
         if not mask.any():
             continue
-        calm = free_for_ever(model, linear[g], sections[mask], sides[mask])
+        # free_for_ever's proof, compiled (:func:`.kernel_books.free_for_ever_flags`)
+        orbit = linear[g]
+        calm = _books()["free_for_ever_flags"](np.ascontiguousarray(sections, float), np.asarray(sides, float), mask,
+                                               float(orbit.nodes[0, 0]), float(orbit.nodes[0, 1]), float(model.free.w2),
+                                               float(orbit.low), float(orbit.high), float(model.half_gap))
         if calm.any():
             if g not in quiet:
                 quiet[g] = len(state.attractors)
                 state.attractors.append(Quiet(int(g), linear[g]))
-            chosen = ids[mask][calm]
+            chosen = ids[calm]
             state.labels[chosen] = quiet[g]
             state.periods[chosen] = marched
 
@@ -319,19 +323,14 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
     # compiled (:func:`.kernel_books.shrinking_returns`)
     shrinking = _books()["shrinking_returns"](np.ascontiguousarray(sections, float),
                                               np.ascontiguousarray(scales[groups], float), open_, most, SEED_REACH)
-    rows = np.flatnonzero(shrinking.any(axis=1))
-    if not rows.size:
+    if not shrinking.any():
         return
-    # the impacts and the side of each period in one number: the same sequence is the same numbers
-    sequence = 3 * impacts + (np.asarray(sides, np.int64) + 1)
-    taken: set = set()
-    for k in rows.tolist():
-        order = k + 1
-        converging = shrinking[k] & (sequence[order:] == sequence[:-order]).all(axis=0)
-        for j in np.flatnonzero(converging).tolist():
-            if j not in taken:
-                taken.add(j)
-                chosen.setdefault(order, []).append(j)
+    # each trajectory's least order whose returns shrink with the same impacts and sides at that lag
+    # in every period (compiled: :func:`.kernel_books.converging_orders`), the seeds by order
+    orders = _books()["converging_orders"](shrinking, np.ascontiguousarray(impacts, np.int64),
+                                           np.ascontiguousarray(sides, np.int64))
+    for order in np.unique(orders[orders > 0]).tolist():
+        chosen[order] = np.flatnonzero(orders == order).tolist()
     for order, seeds in chosen.items():
         seeds = _spread(seeds, groups, sections[-1], scales, state, settings.seeds)
         if not seeds:
