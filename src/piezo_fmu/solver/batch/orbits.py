@@ -143,7 +143,9 @@ def _hermite_range(nodes: np.ndarray, h: float) -> tuple[float, float]:
 def free_for_ever(model: BatchModel, orbit: LinearOrbit, states: np.ndarray, sides: np.ndarray) -> np.ndarray:
     """Which of ``states`` (at the section, (n, 4)) never impact again: free, the impact mass at
     rest, and ``q - p*`` kept inside the gap by a margin larger than the transient can still move
-    the main mass (see the module's text). A proof for each True; False says nothing."""
+    the main mass (see the module's text). A proof for each True; False says nothing. ``settle``
+    runs its compiled twin at every look (:func:`.kernel_books.free_for_ever_flags`, held to this
+    one by the tests)."""
     p, dp, q, dq = states.T
     w2 = model.free.w2
     e, de = p - orbit.nodes[0, 0], dp - orbit.nodes[0, 1]
