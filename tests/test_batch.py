@@ -134,6 +134,26 @@ def test_a_grazing_touch_is_a_contact_exactly_when_the_core_finds_one(depth):
     assert record["impacts"][0, 0] == onsets[0] == (1 if depth > 0 else 0)
 
 
+@pytest.mark.parametrize("damping, kind", [(63.0, "under"), (2.0 * W_N, "critical"), (100.0, "over")])
+def test_the_engine_follows_the_core_whatever_the_main_masss_damping(damping, kind):
+    """Free flight has three closed forms (cos and sin, the series at critical damping, cosh and
+    sinh); the nominal damper takes only the first. Near, at and above critical damping (``C`` =
+    63, ``2 sqrt(K M)`` and 100 N s/m; the coupled circuit), from a start that impacts in every
+    period: the same onsets as the scalar core, whose brackets know no such cases, and the sections
+    within 1e-9 m."""
+    params = Parameters(C=damping, voltage_model=2, R_load=3.59e6)
+    beta2 = BatchModel.of(params).free.beta2
+    assert {"under": beta2 < -1e-12 * 1000.0, "critical": abs(beta2) <= 1e-12 * 1000.0,
+            "over": beta2 > 1e-12 * 1000.0}[kind]
+    drive = HarmonicHold(W_N, 3e-3)
+    start = (0.0, 0.2, 3e-3, 0.0)
+    record = Ensemble(params, drive, [start]).advance(30)
+    sections, onsets = core_sections(params, drive, start, 30)
+    assert onsets.min() >= 1
+    assert record["impacts"][:, 0].tolist() == onsets.tolist()
+    assert np.abs(record["sections"][:, 0] - sections).max() < 1e-9
+
+
 def test_without_impacts_the_motion_is_the_base_excited_oscillator():
     """A gap the impact mass cannot cross: the batch engine's steady state is the closed form of the
     linear orbit, whose amplitude is the base-excited oscillator's to the hold's harmonics."""
