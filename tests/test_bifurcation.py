@@ -175,6 +175,7 @@ def test_the_persistence_check_finds_a_claim_that_reaches_an_orbit(diagram, tmp_
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
     (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
+    (["--jobs", "0"], ["--jobs 0", "worker", "allowed range [1, inf)"]),
     (["--device", "gpu"], ["--device gpu", "numba", "GPU"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):

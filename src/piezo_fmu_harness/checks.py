@@ -94,7 +94,7 @@ def worker_count(args) -> int:
 
     jobs = args.jobs if args.jobs is not None else default_jobs()
     if jobs < 1:
-        raise UsageError(f"--jobs {jobs}: need at least 1 worker")
+        raise UsageError(f"--jobs {jobs}: need at least 1 worker; allowed range [1, inf)")
     return jobs
 
 
