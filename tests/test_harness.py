@@ -262,12 +262,13 @@ def test_two_designs_table_puts_the_papers_numbers_beside_ours(fmu, tmp_path):
     (["--grid", "x1=0:0.03:4", "--set", "voltage_rms=1"], ["unknown parameter 'voltage_rms'", "output"]),
     (["--grid", "x1=0.03:0:4"], ["reversed range", "x1", "START = 0.03", "STOP = 0"]),
     (["--grid", "m=0.1:0.1:4"], ["empty range", "m"]),
-    (["--grid", "m=0.02:0.2:0"], ["empty range", "m", "COUNT = 0"]),
+    (["--grid", "m=0.02:0.2:0"], ["empty range", "m", "COUNT = 0", "allowed range [1, inf)"]),
     (["--grid", "m=-0.1:0.2:4"], ["m = -0.1", "is not above 0", "modelDescription"]),
     (["--grid", "x1=0:0.03:4", "--set", "barrier_mode=2"], ["barrier_mode = 2", "above its maximum 1"]),
     (["--grid", "x1=0:0.075:4"], ["the FMU rejects", "x1 = 0.075", "x1 + L_p must be <= L"]),
     (["--grid", "x1=0:0.03"], ["expected NAME=START:STOP:COUNT"]),
-    (["--grid", "x1=0:0.03:4", "--stop-time", "0"], ["--stop-time", "> 0"]),
+    (["--grid", "x1=0:0.03:4", "--stop-time", "0"], ["--stop-time", "> 0", "allowed range (0, inf) s"]),
+    (["--grid", "x1=0:0.03:4", "--step", "-1"], ["--step -1", "allowed range (0, inf) s"]),
     (["--grid", "x1=0:0.03:4", "--damping", "eq31"], ["--damping", "invalid choice: 'eq31'", "'eq29', 'ls'"]),
 ])
 def test_bad_sweep_input_is_refused_with_exit_status_2(fmu, tmp_path, capsys, argv, words):

@@ -186,7 +186,7 @@ def test_the_single_impact_peak_is_the_fmus_own_impact_voltage(tmp_path):
     ("load-sweep", ["--models", "3"], ["--models 3", "voltage_model = 3 is", "above its maximum 2", "[0, 2]"]),
     ("load-sweep", ["--models", "1,x"], ["--models 1,x", "voltage_model = 'x' is not a number"]),
     ("load-sweep", ["--models", "0"], ["voltage_model = 0", "harvests no energy", "1 or 2"]),
-    ("load-sweep", ["--count", "2"], ["--count 2", "at least 3 loads"]),
+    ("load-sweep", ["--count", "2"], ["--count 2", "at least 3 loads", "allowed range [3, inf)"]),
     ("load-sweep", ["--set", "R_load=1e6"], ["--set R_load", "--r-min"]),
     ("load-sweep", ["--models", "2", "--r-min", "100"], ["the FMU rejects", "voltage_model = 2, R_load = 100",
                                                         "R_load"]),

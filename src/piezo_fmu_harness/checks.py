@@ -93,9 +93,7 @@ def worker_count(args) -> int:
     from .engine import default_jobs
 
     jobs = args.jobs if args.jobs is not None else default_jobs()
-    if jobs < 1:
-        raise UsageError(f"--jobs {jobs}: need at least 1 worker; allowed range [1, inf)")
-    return jobs
+    return whole(jobs, "--jobs", 1, "need at least 1 worker")
 
 
 def make_backend(args, model, unzipdir: str, jobs: int):

@@ -156,7 +156,8 @@ def make_axis(model: FmuModel, name: str, start: float, stop: float, count, wher
     if not isinstance(count, int) or isinstance(count, bool):
         raise UsageError(f"{where}: COUNT = {count!r} is not a whole number of points")
     if count < 1:
-        raise UsageError(f"{where}: empty range for {name}: COUNT = {count} (need at least 1 point)")
+        raise UsageError(f"{where}: empty range for {name}: COUNT = {count} (need at least 1 point; "
+                         "allowed range [1, inf))")
     if count > 1 and start == stop:
         raise UsageError(f"{where}: empty range for {name}: START = STOP = {start:g} with COUNT = {count} "
                          "(use COUNT = 1 for a single value, or --set)")
@@ -248,9 +249,11 @@ def load_toml(model: FmuModel, path: Path) -> dict:
 def check_times(stop_time: float, step: float) -> None:
     """A positive, finite duration and communication step, the step no longer than the run."""
     if not (math.isfinite(stop_time) and stop_time > 0):
-        raise UsageError(f"--stop-time {stop_time:g}: the duration must be a finite number of seconds > 0")
+        raise UsageError(f"--stop-time {stop_time:g}: the duration must be a finite number of seconds > 0; "
+                         "allowed range (0, inf) s")
     if not (math.isfinite(step) and step > 0):
-        raise UsageError(f"--step {step:g}: the communication step must be a finite number of seconds > 0")
+        raise UsageError(f"--step {step:g}: the communication step must be a finite number of "
+                         "seconds > 0; allowed range (0, inf) s")
     if step > stop_time:
         raise UsageError(f"--step {step:g} is longer than --stop-time {stop_time:g}")
 

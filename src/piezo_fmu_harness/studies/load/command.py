@@ -11,6 +11,7 @@ from ...checks import (
     open_model,
     preflight,
     times,
+    whole,
     worker_count,
 )
 from ...spec import DEFAULT_SWEEP_STEP, UsageError
@@ -68,8 +69,7 @@ def load_sweep(args) -> int:
         raise UsageError(f"--r-min {r_min:g} is not below --r-max {r_max:g}: "
                          f"{'reversed' if r_min > r_max else 'empty'} range of R_load (give R_MIN < R_MAX, in Ohm)")
     count = load.DEFAULT_COUNT if args.count is None else args.count
-    if count < 3:
-        raise UsageError(f"--count {count}: need at least 3 loads to locate an optimum")
+    whole(count, "--count", 3, "need at least 3 loads to locate an optimum")
     stop_time, step = times(args, DEFAULT_SWEEP_STEP)
     impact_step = impacts.IMPACT_STEP if args.impact_step is None else args.impact_step
     check_times(stop_time, impact_step)
