@@ -1,7 +1,7 @@
 """The compiled kernel (issue 32): the source it is compiled from, run as Python, gives its bits; it
 marches the motion of the array engine (its oracle, the same physics written with array operations);
 the GPU's code is the same source, run here on numba's CUDA simulator; the Lyapunov measure marches
-the pair the array engine marched; and a copy of the package (an FMU's) finds the compiled code.
+the pair the array engine marched. Where its compiled code is kept: ``test_kernel_cache.py``.
 
 The agreement with the scalar core and with the FMU, one trajectory alone against a batch of
 10,000, and grazing contacts are in ``test_batch.py``, which runs on the kernel.
@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -354,42 +353,3 @@ def test_without_a_gpu_the_gpu_device_says_what_is_missing():
         Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)], device="gpu")
     with pytest.raises(ValueError, match=r"device = 'tpu' is not known; allowed values \('cpu', 'gpu'\)"):
         Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)], device="tpu")
-
-
-def test_a_copy_of_the_package_finds_the_compiled_kernel_in_the_cache(tmp_path):
-    """A process that imports ``piezo_fmu`` from another folder (an FMU's unpacked copy) loads the
-    kernel that this one compiled instead of compiling it again."""
-    Ensemble(DAMPERS["nominal"], HarmonicHold(W_N, 1e-3), [(0.0, 0.0, 0.0, 0.0)]).advance(1)  # compiled or loaded
-    copy = tmp_path / "resources"
-    shutil.copytree(ROOT / "src" / "piezo_fmu", copy / "piezo_fmu", ignore=shutil.ignore_patterns("__pycache__"))
-    code = ("import piezo_fmu, numpy as np\n"
-            "from piezo_fmu import Parameters\n"
-            "from piezo_fmu.solver.batch import Ensemble, HarmonicHold\n"
-            "assert piezo_fmu.__file__.startswith(%r), piezo_fmu.__file__\n"
-            "Ensemble(Parameters(), HarmonicHold(31.6, 1e-3), [(0.0, 0.0, 0.0, 0.0)]).advance(1)\n" % str(copy))
-    env = dict(os.environ, NUMBA_DEBUG_CACHE="1", PYTHONPATH=str(copy))
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600,
-                            cwd=tmp_path)
-    assert result.returncode == 0, result.stderr[-3000:]
-    log = result.stdout + result.stderr
-    assert "data loaded" in log
-    assert "data saved" not in log, log[-3000:]
-
-
-def test_each_version_of_the_kernels_files_has_its_own_cache_folder(tmp_path):
-    """The compiled code is kept by the content of all three files: a copy elsewhere finds the same
-    folder, a change to any one of them (the drivers' file included) another."""
-    from piezo_fmu.solver.batch import kernel_cache
-
-    files = [Path(kernel.__file__).with_name(name) for name in ("kernel_phases.py", "kernel_source.py", "kernel.py")]
-    copies = []
-    for name in ("a", "b"):
-        (tmp_path / name).mkdir()
-        copies.append([tmp_path / name / f.name for f in files])
-        for f, c in zip(files, copies[-1]):
-            c.write_bytes(f.read_bytes())
-    here = kernel_cache.version_folder(tuple(files), tmp_path)
-    assert kernel_cache.version_folder(tuple(copies[0]), tmp_path) == here
-    copies[1][2].write_text(copies[1][2].read_text() + "\n# another INLINE\n")
-    assert kernel_cache.version_folder(tuple(copies[1]), tmp_path) != here
-    assert here.parent == tmp_path

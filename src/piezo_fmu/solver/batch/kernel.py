@@ -14,7 +14,8 @@ marches, and the FMUs' runtime never does.
 **The disk cache.** The CPU code is compiled once per machine and kept in ``$NUMBA_CACHE_DIR`` or
 else ``~/.cache/piezo-fmu/numba`` (``$XDG_CACHE_HOME`` respected), keyed by the source's content:
 a process that imported ``piezo_fmu`` from an FMU's copy of the package (a host process loads the
-FMU's own copy) finds the same compiled code as one that imported the installed package.
+FMU's own copy) finds the same compiled code as one that imported the installed package. Where that
+folder cannot be written, the code is compiled for the process alone, with a warning that says so.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import math
 import os
 import threading
 import types
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -108,13 +110,22 @@ def _separate_cpu(state, failed, groups, offset, scale, delta, drive, c, logs, s
 def _cpu() -> dict:
     import numba
     from . import kernel_cache
-    kernel_cache.install((physics.__file__, source.__file__, flow.__file__, books.__file__, __file__), cache_dir())
+    files = (physics.__file__, source.__file__, flow.__file__, books.__file__, __file__)
+    folder = kernel_cache.version_folder(files, cache_dir())
+    problem = kernel_cache.unwritable(folder)
+    if problem is None:
+        kernel_cache.install(files, folder)
+    else:
+        warnings.warn(f"piezo-fmu: the compiled kernel cannot be kept in {folder} ({problem}): it is compiled for "
+                      "this process alone (about 10 s in every process); set NUMBA_CACHE_DIR to a writable folder "
+                      "to keep it", RuntimeWarning, stacklevel=3)
+    cache = problem is None
     # The inner functions touch no reference-counted object: without numba's runtime (``_nrt``)
     # their array arguments are not counted at every call, which cost more than the physics.
-    options = dict(cache=True, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
+    options = dict(cache=cache, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
     jit, inline = numba.njit(**options), numba.njit(inline="always", **options)
-    parallel = numba.njit(cache=True, parallel=True, error_model="numpy")
-    serial = numba.njit(cache=True, error_model="numpy")
+    parallel = numba.njit(cache=cache, parallel=True, error_model="numpy")
+    serial = numba.njit(cache=cache, error_model="numpy")
     drivers = {"march": (_march_cpu, parallel), "march_flat": (_march_flat_cpu, parallel),
                "separate": (_separate_cpu, parallel), "largest4": (books.largest4, inline),
                "shrinking_returns": (books.shrinking_returns, serial), "orbit_distances": (books.orbit_distances, serial),

@@ -17,6 +17,10 @@ changed) and was loaded beside code compiled afresh: a cache left so by an ``INL
 changed back crashed the Lyapunov march in about half the processes (a segmentation fault), where
 a fresh cache never did. Now a changed file means a fresh folder, compiled once; the old folders
 stay until removed (a few MB each). numba's other functions are untouched.
+
+**A folder that cannot be written** (a home that is not the user's, a read-only container) would
+make numba refuse to compile at all ("no locator available"): :func:`unwritable` says why before
+anything is compiled, and the kernel is then compiled for its process alone, with a warning.
 """
 
 from __future__ import annotations
@@ -38,17 +42,29 @@ def version_folder(files: tuple, folder: Path) -> Path:
     return Path(folder) / digest.hexdigest()[:16]
 
 
+def unwritable(folder: Path) -> str | None:
+    """Why compiled code cannot be kept in ``folder`` (None when it can): numba's own test, the
+    folder made and a temporary file written in it."""
+    import tempfile
+
+    try:
+        os.makedirs(folder, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError as error:
+        return f"{type(error).__name__}: {error}"
+    return None
+
+
 def install(files: tuple, folder: Path) -> None:
     """Put the locator in front of numba's own, for the functions of ``files`` (their names, under
     a ``piezo_fmu/solver/batch`` folder), once per process; their compiled code is kept in
-    :func:`version_folder` of ``folder``."""
+    ``folder`` (their :func:`version_folder`)."""
     from numba.core import caching
 
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     if any(getattr(cls, "_piezo_fmu", False) for cls in impl._locator_classes):
         return
     names = {os.path.basename(f) for f in files}
-    folder = version_folder(files, folder)
 
     class KernelLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
         _piezo_fmu = True
