@@ -154,6 +154,7 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
     (["--ratio", "1.2", "--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--ratio", "1.2", "--amplitude", "0"], ["--amplitude 0", "allowed range (0, inf) m"]),
     (["--ratio", "1.2", "--device", "gpu"], ["--device gpu", "numba", "GPU"]),
+    (["--ratio", "1.2", "--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -176,6 +176,7 @@ def test_the_persistence_check_finds_a_claim_that_reaches_an_orbit(diagram, tmp_
     (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
     (["--jobs", "0"], ["--jobs 0", "worker", "allowed range [1, inf)"]),
+    (["--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
     (["--device", "gpu"], ["--device gpu", "numba", "GPU"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):

@@ -186,6 +186,7 @@ def test_an_interrupted_study_resumes_to_the_same_fractions(fractions, tmp_path)
     (["--seed", "-1"], ["--seed -1", "allowed range [0, inf)"]),
     (["--confirm", "-2"], ["--confirm -2", "allowed range [0, inf)"]),
     (["--set", "d=-0.01"], ["d = -0.01 is not above 0"]),
+    (["--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
 ])
 def test_bad_fractions_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -62,7 +62,7 @@ def command(args) -> int:
     from ...fmu import discard
     import time
 
-    from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
+    from ...checks import PROG, device, engine_damper, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec, linear_transmissibility
     from ...periodic.many import backend_for, confirm, execute
     from . import study
@@ -93,6 +93,7 @@ def command(args) -> int:
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
+        engine_damper(spec.values)
         folder, done, start_over = study.open_basins(model, spec, args.out, args.resume, args.force)
         backend = backend_for(args, model, unzipdir, instance, jobs)
         begin = time.perf_counter()

@@ -36,7 +36,7 @@ def command(args) -> int:
     from ...fmu import discard
     from pathlib import Path
 
-    from ...checks import PROG, device, make_backend, open_model, preflight, whole, worker_count
+    from ...checks import PROG, device, engine_damper, make_backend, open_model, preflight, whole, worker_count
     from ...engine import InProcess
     from ...periodic.band import frequency_spec
     from ...spec import UsageError
@@ -54,6 +54,7 @@ def command(args) -> int:
         device(args.device, device_error)
         args.newton_iterations = None
         spec = frequency_spec(args, model, instance, study.DEFAULTS)
+        engine_damper(spec.values)
         folder = Path(args.out)
         if (folder / "bifurcation.nc").exists() and not args.force:
             raise UsageError(f"--out {folder}: holds a bifurcation diagram already; give --force to replace it")

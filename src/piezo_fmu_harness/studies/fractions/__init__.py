@@ -48,7 +48,7 @@ def command(args) -> int:
     from ...fmu import discard
     import time
 
-    from ...checks import PROG, device, open_model, positive, preflight, whole, worker_count
+    from ...checks import PROG, device, engine_damper, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec
     from ...periodic.many import backend_for, execute
     from . import study
@@ -68,6 +68,7 @@ def command(args) -> int:
         args.newton_iterations = None
         band = frequency_spec(args, model, instance, study.DEFAULTS)
         parameters = {**model.defaults(), **band.values}
+        engine_damper(parameters)
         span = positive(parameters["d"] if args.span is None else args.span, "--span",
                         "the half-width of the starts' p0", "m")
         settings = band.settings
