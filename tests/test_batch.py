@@ -185,6 +185,33 @@ def test_the_engine_follows_the_core_across_random_dampers_drives_and_starts():
     assert len(seen) == 12 and onsets_seen > 100  # every kind of damper, and the events exercised
 
 
+def test_a_contact_resting_on_its_barrier_through_long_hold_steps_follows_the_core():
+    """A light impact mass (1.4 g) on a stiff, damped barrier under a slow drive (hold steps of 62 ms):
+    it lands slowly and rests on the barrier, its separation function within a few 1e-11 m of zero,
+    and each search must prove in thousands of safe steps that it stays there (the source with the
+    old cap of 200 steps sets the trajectory aside in its first period). The onsets of the scalar
+    core for two periods, the section after the first within 1e-9 m."""
+    params = Parameters(M=10.62, K=38.13, C=19.66, m=1.374e-3, d=0.0219, C_eq=19.95, E_b=2.7016e10, L=0.03624,
+                        t_b=0.01549, W_b=0.0029, x1=5.18e-4, voltage_model=1, barrier_mode=1, R_load=1.092e6)
+    drive = HarmonicHold(0.829 * math.sqrt(params.K / params.M), 0.3 * params.d)
+    start = (-0.01706, -0.2943, -0.01271, 0.0)
+    record = Ensemble(params, drive, [start]).advance(2)
+    sections, onsets = core_sections(params, drive, start, 2)
+    assert record["impacts"][:, 0].tolist() == onsets.tolist() and onsets[0] >= 5
+    assert np.abs(record["sections"][0, 0] - sections[0]).max() < 1e-9
+    # the same march by the source run as Python, with the search capped at 200 steps: set aside
+    from piezo_fmu.solver.batch import kernel
+
+    plain = kernel._compiled(lambda f: f, {})
+    plain["MAX_ITERATIONS"] = 200
+    state, failed = np.zeros((7, 1)), np.zeros(1, bool)
+    state[:4, 0] = start
+    out = (np.empty((1, 1, 4)), np.empty((1, 1)), np.empty((1, 1), np.int64), np.empty((1, 1)), np.empty((1, 1)))
+    tables = kernel.Tables(BatchModel.of(params), [drive])
+    plain["march_one"](False, 0, state, failed, np.zeros(1, np.int64), *tables.arguments(), *out, np.empty(plain["WORK"]))
+    assert failed[0] and np.isnan(out[0]).all()
+
+
 def test_without_impacts_the_motion_is_the_base_excited_oscillator():
     """A gap the impact mass cannot cross: the batch engine's steady state is the closed form of the
     linear orbit, whose amplitude is the base-excited oscillator's to the hold's harmonics."""
