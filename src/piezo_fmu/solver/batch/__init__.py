@@ -54,5 +54,16 @@ def damper(values: dict) -> Parameters:
                       p0=0.0, q0=0.0, dp0=0.0, dq0=0.0)
 
 
-__all__ = ["DEVICES", "Ensemble", "device_error", "HarmonicHold", "SettleSettings", "Settled", "damper", "describe", "namespace",
+def damper_error(values: dict) -> str | None:
+    """Why the batch engine cannot take the damper of the FMU parameter values ``values`` (None when
+    it can): the modes of its contact must be distinct and decaying."""
+    from .phases import BatchModel
+    try:
+        BatchModel.of(damper(values))
+    except ValueError as error:
+        return str(error)
+    return None
+
+
+__all__ = ["DEVICES", "Ensemble", "device_error", "damper_error", "HarmonicHold", "SettleSettings", "Settled", "damper", "describe", "namespace",
            "settle", "to_numpy", "tracks"]

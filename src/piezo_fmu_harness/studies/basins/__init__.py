@@ -90,10 +90,11 @@ def command(args) -> int:
         settings = band.settings
         spec = study.BasinSpec(ratio, omega, amplitude, {**parameters, **band.values}, p0, dp0, settings.samples,
                                settings.tolerance, settings.max_cycles, args.device, confirm_count, seed)
+        import piezo_fmu.solver.batch as batch
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
-        engine_damper(spec.values)
+        engine_damper(spec.values, getattr(batch, "damper_error", None))
         folder, done, start_over = study.open_basins(model, spec, args.out, args.resume, args.force)
         backend = backend_for(args, model, unzipdir, instance, jobs)
         begin = time.perf_counter()

@@ -49,12 +49,13 @@ def command(args) -> int:
     seed = whole(0 if args.seed is None else args.seed, "--seed", 0, "the seed is a whole number >= 0")
     unzipdir, instance = preflight(model, [{}], "--fmu")
     try:
+        import piezo_fmu.solver.batch as batch
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
         args.newton_iterations = None
         spec = frequency_spec(args, model, instance, study.DEFAULTS)
-        engine_damper(spec.values)
+        engine_damper(spec.values, getattr(batch, "damper_error", None))
         folder = Path(args.out)
         if (folder / "bifurcation.nc").exists() and not args.force:
             raise UsageError(f"--out {folder}: holds a bifurcation diagram already; give --force to replace it")

@@ -62,13 +62,14 @@ def command(args) -> int:
     jobs = worker_count(args)
     unzipdir, instance = preflight(model, [{}], "--fmu")
     try:
+        import piezo_fmu.solver.batch as batch
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
         args.newton_iterations = None
         band = frequency_spec(args, model, instance, study.DEFAULTS)
         parameters = {**model.defaults(), **band.values}
-        engine_damper(parameters)
+        engine_damper(parameters, getattr(batch, "damper_error", None))
         span = positive(parameters["d"] if args.span is None else args.span, "--span",
                         "the half-width of the starts' p0", "m")
         settings = band.settings
