@@ -134,12 +134,15 @@ class Searches:
       width.
     """
 
-    __slots__ = ("contact", "terminal", "maxima", "peaks", "clear", "fail", "bounded")
+    __slots__ = ("contact", "terminal", "emerging", "maxima", "peaks", "clear", "fail", "bounded")
 
     def __init__(self, contact: bool):
         self.contact = contact
         #: The switch's searches: ``(target, g, b, noise, row)``, in the opener's order.
         self.terminal: list = []
+        #: ``(target, g, noise)`` of those taken as zero at a phase start: the switch is also where
+        #: one first passes its rounding level on the switch's side (:meth:`run`).
+        self.emerging: list = []
         #: The searches ``(g, b, noise, row)`` (``_fall_search``) of the maxima of ``p`` and, in
         #: contact, of the peaks of ``delta``; None where the function keeps one strict sign.
         self.maxima: tuple | None = None
@@ -180,6 +183,16 @@ class Searches:
         direction = -1 if self.contact else +1  # a contact ends as delta falls through zero
         for target, g, b, noise, row in self.terminal:
             roots = crossings(g, direction, b, noise, row)
+            if roots and roots[0] < br.s_switch:
+                br.s_switch, br.switch_to = roots[0], target
+        # A function taken as zero at a phase start whose rate leaves it the other way (the rate's
+        # sign decides the start) but turns back within rounding is never read on that side: no
+        # crossing to find, and the switch would be missed (a body leaving a barrier at 1e-13 m/s
+        # that the barrier catches passed through it). It switches where it leaves rounding.
+        for target, g, noise in self.emerging:
+            level = g.copy()
+            level[0] -= direction * noise
+            roots = crossings(level, direction)
             if roots and roots[0] < br.s_switch:
                 br.s_switch, br.switch_to = roots[0], target
         events = [] if self.maxima is None else [(s, MAXIMUM) for s in crossings(self.maxima[0], -1, *self.maxima[1:])
@@ -330,13 +343,14 @@ class BracketOpener:
                 # The start value set to zero: every Bernstein coefficient holds it with weight 1.
                 # Most often the rest then has one strict sign (rounding is monotonic, so the
                 # extremes of the shifted coefficients are the shifted extremes): no root.
-                rest = row[1:]
-                if min(rest) - start_value > 0.0 or max(rest) - start_value < 0.0:
+                low, high = min(row[1:]) - start_value, max(row[1:]) - start_value
+                if (low > 0.0 and direction < 0) or (high < 0.0 and direction > 0):
                     continue
                 g = g.copy()
                 g[0] = 0.0
                 b = b - start_value
                 row = [value - start_value for value in row]
+                searches.emerging.append((targets[j], g, noise))
             searches.terminal.append((targets[j], g, b, noise, row))
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
         searches.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
