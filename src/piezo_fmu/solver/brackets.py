@@ -37,6 +37,9 @@ DEFER = True
 #: How far (normalised time) beyond a move's end a put-off search is shown to have no root before
 #: the move goes on without it: more than any last Newton step of the refinement (``NEWTON_LAST``).
 DEFER_MARGIN = 2.0**-20
+#: A function taken as zero at a phase start has left rounding once it passes this many times its
+#: rounding level (:meth:`Searches.run`); below, it drifts or grazes by rounding.
+EMERGE = 16.0
 assert DEFER_MARGIN > NEWTON_LAST
 
 
@@ -140,8 +143,8 @@ class Searches:
         self.contact = contact
         #: The switch's searches: ``(target, g, b, noise, row)``, in the opener's order.
         self.terminal: list = []
-        #: ``(target, g, noise)`` of those taken as zero at a phase start: the switch is also where
-        #: one first passes its rounding level on the switch's side (:meth:`run`).
+        #: ``(target, g, noise)`` of those taken as zero at a phase start whose rate said the side:
+        #: the switch is also where one first passes its rounding level on the switch's side.
         self.emerging: list = []
         #: The searches ``(g, b, noise, row)`` (``_fall_search``) of the maxima of ``p`` and, in
         #: contact, of the peaks of ``delta``; None where the function keeps one strict sign.
@@ -188,13 +191,13 @@ class Searches:
         # A function taken as zero at a phase start whose rate leaves it the other way (the rate's
         # sign decides the start) but turns back within rounding is never read on that side: no
         # crossing to find, and the switch would be missed (a body leaving a barrier at 1e-13 m/s
-        # that the barrier catches passed through it). It switches where it leaves rounding.
+        # that the barrier catches passed through it). It switches where it last leaves its
+        # rounding level before it first passes EMERGE times it (a hump within that is a graze).
         for target, g, noise in self.emerging:
-            level = g.copy()
-            level[0] -= direction * noise
-            roots = crossings(level, direction)
-            if roots and roots[0] < br.s_switch:
-                br.s_switch, br.switch_to = roots[0], target
+            clear = crossings(_level(g, direction * EMERGE * noise), direction)
+            roots = [r for r in crossings(_level(g, direction * noise), direction) if clear and r <= clear[0]]
+            if roots and roots[-1] < br.s_switch:
+                br.s_switch, br.switch_to = roots[-1], target
         events = [] if self.maxima is None else [(s, MAXIMUM) for s in crossings(self.maxima[0], -1, *self.maxima[1:])
                                                  if s <= br.s_switch]
         if self.contact:
@@ -333,7 +336,8 @@ class BracketOpener:
                 # other forever at one instant.
                 barrier = targets[j] if side == FREE else side
                 rate = barrier * (xs[DW] - xs[DU])
-                if abs(rate) > NOISE_ULPS * EPS * (sizes[DW] + sizes[DU]):
+                by_rate = abs(rate) > NOISE_ULPS * EPS * (sizes[DW] + sizes[DU])
+                if by_rate:
                     start = 1 if rate > 0.0 else -1
                 else:
                     start = approach_sign(self.K, self.C, xs[0], xs[DU], barrier)
@@ -350,7 +354,8 @@ class BracketOpener:
                 g[0] = 0.0
                 b = b - start_value
                 row = [value - start_value for value in row]
-                searches.emerging.append((targets[j], g, noise))
+                if by_rate:  # a rate that may turn back unseen (a function at rest is rounding)
+                    searches.emerging.append((targets[j], g, noise))
             searches.terminal.append((targets[j], g, b, noise, row))
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
         searches.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
@@ -363,6 +368,13 @@ class BracketOpener:
         else:
             searches.run(br)
         return br
+
+
+def _level(g: np.ndarray, value: float) -> np.ndarray:
+    """The power coefficients of ``g - value``."""
+    shifted = g.copy()
+    shifted[0] -= value
+    return shifted
 
 
 def _one_strict_sign(row: list[float]) -> bool:
