@@ -144,7 +144,7 @@ class Searches:
         #: The switch's searches: ``(target, g, b, noise, row)``, in the opener's order.
         self.terminal: list = []
         #: ``(target, g, noise)`` of those taken as zero at a phase start whose rate said the side:
-        #: the switch is also where one first passes its rounding level on the switch's side.
+        #: the switch may also be where one leaves rounding on the switch's side (:meth:`run`).
         self.emerging: list = []
         #: The searches ``(g, b, noise, row)`` (``_fall_search``) of the maxima of ``p`` and, in
         #: contact, of the peaks of ``delta``; None where the function keeps one strict sign.
@@ -346,7 +346,7 @@ class BracketOpener:
                     return br
                 # The start value set to zero: every Bernstein coefficient holds it with weight 1.
                 # Most often the rest then has one strict sign (rounding is monotonic, so the
-                # extremes of the shifted coefficients are the shifted extremes): no root.
+                # extremes of the shifted coefficients are the shifted extremes): away, no root.
                 low, high = min(row[1:]) - start_value, max(row[1:]) - start_value
                 if (low > 0.0 and direction < 0) or (high < 0.0 and direction > 0):
                     continue
