@@ -145,7 +145,7 @@ class Searches:
         self.terminal: list = []
         #: ``(target, g, noise)`` of those taken as zero at a phase start whose rate said the side:
         #: the switch may also be where one leaves rounding on the switch's side (:meth:`run`).
-        self.emerging: list = []
+        self.emerging: tuple = ()  # a tuple: no allocation at every bracket's opening (nearly all)
         #: The searches ``(g, b, noise, row)`` (``_fall_search``) of the maxima of ``p`` and, in
         #: contact, of the peaks of ``delta``; None where the function keeps one strict sign.
         self.maxima: tuple | None = None
@@ -355,7 +355,7 @@ class BracketOpener:
                 b = b - start_value
                 row = [value - start_value for value in row]
                 if by_rate:  # a rate that may turn back unseen (a function at rest is rounding)
-                    searches.emerging.append((targets[j], g, noise))
+                    searches.emerging += ((targets[j], g, noise),)
             searches.terminal.append((targets[j], g, b, noise, row))
         # Non-terminal events before the switch: maxima of p and, in contact, peaks of delta.
         searches.maxima = _fall_search(G, B, values, 2, sizes, noise_rows, v)
