@@ -113,7 +113,7 @@ class ModelExchange:
 
     def indicators(self) -> list:
         run = self.run
-        return run.eq.indicators(run.x, run.side) if run is not None else [UNUSED] * len(INDICATORS)
+        return run.indicators() if run is not None else [UNUSED] * len(INDICATORS)
 
     def nominals(self) -> list:
         run = self.run

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import operator
+import sys
 from typing import Optional
 
 from piezo_fmu.fmi.variables import INDICATORS, STATES
@@ -32,6 +33,16 @@ NOISE = 64 * 2.0**-52
 MAX_SWITCHES_AT_ONE_INSTANT = 8
 #: The value of an indicator in a phase that does not use it.
 UNUSED = 1.0
+#: The least rounding level of an indicator, so that none is ever shown as an exact zero.
+FLOOR = sys.float_info.min
+
+
+def held(value: float, level: float, sign: int) -> float:
+    """An indicator's ``value``, or its rounding ``level`` with the ``sign`` of the side it is held on
+    where the value is within that level of zero: the indicator then changes sign only where the
+    value clearly crosses, and an event update never leaves one at zero or on the wrong side of a
+    crossing that rounding alone decides (docs/fmu.md, "Event indicators")."""
+    return value if abs(value) > level else math.copysign(level, sign)
 
 
 def _dot(row, xs) -> float:
@@ -85,15 +96,30 @@ class Equations:
                 dx[CONVERTED] = self.chi * (v_right if side == RIGHT else v_left) * rate
         return dx
 
-    def indicators(self, x: list, side: int) -> list:
-        """The event indicators (:data:`~piezo_fmu.fmi.variables.INDICATORS`)."""
-        damper = self.damper
-        z = [damper.deflection(RIGHT, x[P], x[Q]), damper.deflection(LEFT, x[P], x[Q]), UNUSED, x[DP], UNUSED]
+    def indicators(self, x: list, side: int, signs: tuple = (1, 1, 1)) -> list:
+        """The event indicators (:data:`~piezo_fmu.fmi.variables.INDICATORS`), each :func:`held` within
+        its rounding level: the deflections on the side of the phase (positive in contact with
+        their barrier), the three rates on the sides ``signs`` (deflection rate, ``p'``, ``V'``)."""
+        sides = (1 if side == RIGHT else -1, 1 if side == LEFT else -1) + tuple(signs)
+        return [held(value, level, sign) for value, level, sign in zip(*self.values(x, side), sides)]
+
+    def values(self, x: list, side: int) -> tuple:
+        """The indicators' values, and the rounding level of each: :data:`NOISE` scaled by what each
+        is computed from, and none but :data:`FLOOR` for ``p'``, a state that is also an output (no
+        cancellation makes it, and the indicator is the output's value but for an exact zero)."""
+        damper, p, q = self.damper, x[P], x[Q]
+        length = NOISE * (abs(p) + abs(q) + self.params.d / 2) + FLOOR
+        speed = NOISE * (abs(x[DP]) + abs(x[DQ])) + FLOOR
+        z = [damper.deflection(RIGHT, p, q), damper.deflection(LEFT, p, q), UNUSED, x[DP], UNUSED]
+        levels = [length, length, 0.0, FLOOR, 0.0]
         if side != FREE:
-            z[2] = rate = self.deflection_rate(x, side)
+            rate = self.deflection_rate(x, side)
+            z[2], levels[2] = rate, speed
             if self.circuit:
-                z[4] = circuit_rate(x[V_RIGHT if side == RIGHT else V_LEFT], rate, self.chi, self.C_p, self.R)
-        return z
+                voltage = x[V_RIGHT if side == RIGHT else V_LEFT]
+                z[4] = circuit_rate(voltage, rate, self.chi, self.C_p, self.R)
+                levels[4] = (self.chi * speed + NOISE * abs(voltage) / self.R) / self.C_p + FLOOR
+        return z, levels
 
     def nominals(self) -> list:
         """Nominal sizes of the states: half the gap, the velocity of the main mass's free motion over
@@ -124,6 +150,7 @@ class Run:
         self.acc = MetricAccumulators()
         self.peak_deflection = self.peak_voltage = 0.0
         self.rising = self._rising(y0, v0)  # a zero of p' at the start is no maximum
+        self.signs = [1, 1 if self.rising else -1, 1]  # the sides the rates' indicators are held on
 
     # -- the event update -------------------------------------------------------------------------
 
@@ -140,12 +167,38 @@ class Run:
             jumped = True
         else:
             raise RuntimeError(f"{MAX_SWITCHES_AT_ONE_INSTANT} phase switches at t = {self.t!r} s without progress")
+        jumped = self._on_own_side() or jumped
         self._record_peaks()
         rising = self._rising(y, v)
         if self.rising and not rising:  # p' fell through 0: a maximum of p
             self.acc.maximum(self.t, self.x[P])
         self.rising = rising
+        self._hold(y, v)
         return jumped
+
+    def _on_own_side(self) -> bool:
+        """Put the impact mass on the phase's side of a barrier it touches without a switch (within
+        :data:`SURFACE`, and at or past its surface), so that the barrier's indicator can cross again;
+        True when it moved."""
+        x, damper, q = self.x, self.eq.damper, self.x[Q]
+        for side in (RIGHT, LEFT):
+            delta = damper.deflection(side, x[P], x[Q])
+            if (delta <= 0.0) if side == self.side else (self.side == FREE and delta >= 0.0):
+                self._snap(side, inside=side == self.side)
+        return x[Q] != q
+
+    def _hold(self, y: float, v: float) -> None:
+        """The sides the rates' indicators are held on until the next event: where each is heading
+        (``delta'`` by the approach rule, ``p'`` by whether ``p`` rises), or, for ``V'``, the side
+        its value is on (unchanged while within rounding)."""
+        values, levels = self.eq.values(self.x, self.side)
+        volt = self.signs[2] if abs(values[4]) <= levels[4] else (1 if values[4] > 0.0 else -1)
+        contact = self.side != FREE and self._approach(self.side, y, v) < 0
+        self.signs = [-1 if contact else 1, 1 if self.rising else -1, volt]
+
+    def indicators(self) -> list:
+        """The event indicators now (:meth:`Equations.indicators`)."""
+        return self.eq.indicators(self.x, self.side, self.signs)
 
     def _approach(self, side: int, y: float, v: float) -> int:
         """The sign of the relative velocity towards the barrier on ``side``; where it is zero to
@@ -262,7 +315,7 @@ class Run:
         """The Model Exchange locals (:data:`~piezo_fmu.fmi.variables.MODEL_EXCHANGE`) by name."""
         values = dict(zip(STATES, self.x))
         values.update(zip((f"der({name})" for name in STATES), self.eq.derivatives(self.x, self.side, y, v)))
-        values.update(zip(INDICATORS, self.eq.indicators(self.x, self.side)))
+        values.update(zip(INDICATORS, self.indicators()))
         values["contact_phase"] = self.side
         return values
 
@@ -272,14 +325,14 @@ class Run:
         """The whole state, JSON-safe."""
         return {"t": self.t, "x": list(self.x), "side": self.side, "plastic": self.plastic, "initial": self.initial,
                 "acc": self.acc.to_dict(), "peak_deflection": self.peak_deflection,
-                "peak_voltage": self.peak_voltage, "rising": self.rising}
+                "peak_voltage": self.peak_voltage, "rising": self.rising, "signs": list(self.signs)}
 
     def restore(self, data: dict) -> None:
         self.t, self.x, self.side = float(data["t"]), [float(value) for value in data["x"]], int(data["side"])
         self.plastic, self.initial = float(data["plastic"]), float(data["initial"])
         self.acc = MetricAccumulators.from_dict(data["acc"])
         self.peak_deflection, self.peak_voltage = float(data["peak_deflection"]), float(data["peak_voltage"])
-        self.rising = bool(data["rising"])
+        self.rising, self.signs = bool(data["rising"]), [int(sign) for sign in data["signs"]]
 
     @classmethod
     def of_core(cls, sim) -> "Run":

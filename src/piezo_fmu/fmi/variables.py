@@ -205,16 +205,20 @@ _STATE_LOCALS = (
 _INDICATOR_LOCALS = (
     Variable("gap_right", "Real", "local", "m",
              "Event indicator q - p - d/2: negative in free flight, the right barrier's deflection in contact "
-             "with it; its rising zero is a contact onset, its falling zero a separation"),
+             "with it; its rising zero is a contact onset, its falling zero a separation; within rounding of 0 "
+             "it reads the rounding level, signed as the phase"),
     Variable("gap_left", "Real", "local", "m",
              "Event indicator p - q - d/2: negative in free flight, the left barrier's deflection in contact "
-             "with it; its rising zero is a contact onset, its falling zero a separation"),
+             "with it; its rising zero is a contact onset, its falling zero a separation; within rounding of 0 "
+             "it reads the rounding level, signed as the phase"),
     Variable("deflection_rate", "Real", "local", "m/s",
              "Event indicator: the deflection rate delta' of the barrier in contact, whose falling zero is the "
-             "peak deflection (V_i under voltage_model 0); 1 in free flight"),
+             "peak deflection (V_i under voltage_model 0); 1 in free flight; within rounding of 0 it reads the "
+             "rounding level, signed as the last event found it heading"),
     Variable("voltage_rate", "Real", "local", "V/s",
              "Event indicator: dV/dt of the barrier in contact under voltage_model 1 and 2, whose zeros are "
-             "the candidates for the peak |V| (V_i); 1 in free flight and under voltage_model 0"),
+             "the candidates for the peak |V| (V_i); 1 in free flight and under voltage_model 0; within "
+             "rounding of 0 it reads the rounding level, signed as at the last event"),
 )
 
 
