@@ -116,19 +116,9 @@ def test_the_impact_voltages_approach_the_cores_under_every_voltage_model(values
     assert worst == sorted(worst, reverse=True) and worst[0] < 2e-2 and worst[-1] < 5e-6, worst
 
 
-@pytest.mark.parametrize("rate", [0.0, 1e-13, -1e-13, 1e-9, 1e-6])
-@pytest.mark.parametrize("side", [1, -1], ids=["right", "left"])
-def test_a_start_on_a_barrier_leaving_it_within_rounding_is_neither_lost_nor_stuck(side, rate):
-    """The impact mass starts on a barrier's surface (its indicator at zero) with a relative
-    velocity ``rate`` away from it that the main mass, accelerating into it, turns back within rounding (or
-    none). CVode takes an indicator that starts at zero as inactive until it leaves zero, and a
-    crossing decided by rounding alone as an event at every restart: the mass once passed 0.08 mm
-    through the left barrier (rate 1e-13 and 1e-9 m/s), and with none it stayed at its start
-    (2e7 events of 1e-24 s). The run must end, match the core's impacts, and never be beyond a
-    barrier in free flight."""
-    d, stop = Parameters().d, 0.2
-    values = {"p0": 2e-3 * side, "dp0": 0.1, "q0": 2e-3 * side + side * d / 2, "dq0": 0.1 - side * rate,
-              "voltage_model": 1, "R_load": 3.59e6}
+def against_the_core(values: dict, stop: float = 0.2) -> tuple:
+    """fmpy's CVode (rtol 1e-10) and the core from the start ``values``: the run ended, the same
+    impacts, never beyond a barrier in free flight, the end within 1e-9 m of the core's."""
     result = simulate_fmu(str(FMU3), fmi_type="ModelExchange", relative_tolerance=1e-10, stop_time=stop,
                           output_interval=1e-3, start_values=values, timeout=30,
                           output=["main_displacement", "impactor_displacement", "impact_count", "contact_phase"])
@@ -136,13 +126,46 @@ def test_a_start_on_a_barrier_leaving_it_within_rounding_is_neither_lost_nor_stu
     core.advance(stop, 0.0, 0.0)
     reached = core.readings()
     assert result["time"][-1] == stop
-    assert result["impact_count"][-1] == reached["impact_count"] == (4 if side < 0 else 2)
+    assert result["impact_count"][-1] == reached["impact_count"]
     free = result["contact_phase"] == 0
-    assert np.any(free) and np.any(~free)
-    beyond = np.abs(result["impactor_displacement"] - result["main_displacement"])[free] - d / 2
+    beyond = np.abs(result["impactor_displacement"] - result["main_displacement"])[free] - Parameters().d / 2
     assert beyond.max() < 1e-15, beyond.max()  # measured: 5.1e-16 m (the indicators' rounding level)
     for name in ("main_displacement", "impactor_displacement"):  # measured: 1.5e-10 m at most
         assert abs(result[name][-1] - reached[name]) < 1e-9, name
+    return result, core
+
+
+@pytest.mark.parametrize("rate", [0.0, 1e-13, -1e-13, 1e-9, 1e-6])
+@pytest.mark.parametrize("side", [1, -1], ids=["right", "left"])
+def test_a_start_on_a_barrier_leaving_it_within_rounding_is_neither_lost_nor_stuck(side, rate):
+    """The impact mass starts on a barrier's surface (its indicator at zero) with a relative
+    velocity ``rate`` away from it that the main mass, accelerating into it, turns back within
+    rounding (or none). CVode takes an indicator that starts at zero as inactive until it leaves
+    zero, and a crossing decided by rounding alone as an event at every restart: the mass once
+    passed 0.08 mm through the left barrier (rate 1e-13 and 1e-9 m/s), and with none it stayed at
+    its start (2e7 events of 1e-24 s). The run must end, match the core, and never be beyond a
+    barrier in free flight."""
+    d = Parameters().d
+    values = {"p0": 2e-3 * side, "dp0": 0.1, "q0": 2e-3 * side + side * d / 2, "dq0": 0.1 - side * rate,
+              "voltage_model": 1, "R_load": 3.59e6}
+    result, _ = against_the_core(values)
+    assert result["impact_count"][-1] == (4 if side < 0 else 2)
+    assert 0 in result["contact_phase"] and set(result["contact_phase"]) - {0}
+
+
+@pytest.mark.parametrize("gap", [1e-12, 5e-12])
+@pytest.mark.parametrize("side", [1, -1], ids=["right", "left"])
+def test_a_start_a_picometre_from_a_barrier_that_draws_away_is_no_impact(side, gap):
+    """The impact mass starts ``gap`` from a barrier, closing at 1e-13 m/s, while the main mass
+    draws the barrier away: it never reaches it (the core finds no contact at the start). The
+    event update once took anything within 1e-9 ``d`` (8 pm) of a barrier and moving into it for
+    a contact, and counted an impact at the start that the core does not; it now decides at the
+    deflection's rounding level (docs/fmu.md)."""
+    d = Parameters().d
+    values = {"p0": -2e-3 * side, "dp0": 0.1, "q0": -2e-3 * side + side * (d / 2 - gap), "dq0": 0.1 + side * 1e-13,
+              "voltage_model": 1, "R_load": 3.59e6}
+    _, core = against_the_core(values)
+    assert core.impacts and core.impacts[0].time > 1e-3
 
 
 class RecordingModel(FMU3Model):

@@ -24,8 +24,9 @@ from piezo_fmu.solver.metrics import MetricAccumulators
 
 #: Indices of the continuous states (:data:`piezo_fmu.fmi.variables.STATES`).
 P, DP, Q, DQ, V_LEFT, V_RIGHT, D_C, D_CEQ, W_BASE, H_LEFT, H_RIGHT, CONVERTED = range(len(STATES))
-#: A deflection within this fraction of the gap of zero is on the barrier's surface: a host's event
-#: location lands well within it (CVode's, 1e-13 s, moves a body at 1 m/s by 1e-13 m).
+#: A switch puts the impact mass on the barrier's surface where it left it within this fraction of
+#: the gap of it: a host's event location lands well within it (CVode's, 1e-13 s, moves a body at
+#: 1 m/s by 1e-13 m). Whether it touches is decided at the deflection's rounding level.
 SURFACE = 1e-9
 #: A relative velocity under this many ulp of the velocities is zero (the solver's rounding level).
 NOISE = 64 * 2.0**-52
@@ -74,6 +75,11 @@ class Equations:
         """``p''`` (m/s^2)."""
         return _dot(self.rows[side][0], self.deviation(x, side, y, v))
 
+    def surface(self, x: list) -> float:
+        """The rounding level (m) of a deflection, ``q - p - d/2`` or its mirror: within it, the
+        impact mass touches the barrier's surface."""
+        return NOISE * (abs(x[P]) + abs(x[Q]) + self.params.d / 2) + FLOOR
+
     def deflection_rate(self, x: list, side: int) -> float:
         """``delta' = s (q' - p')`` (m/s) of the barrier on ``side``."""
         return side * (x[DQ] - x[DP])
@@ -108,7 +114,7 @@ class Equations:
         is computed from, and none but :data:`FLOOR` for ``p'``, a state that is also an output (no
         cancellation makes it, and the indicator is the output's value but for an exact zero)."""
         damper, p, q = self.damper, x[P], x[Q]
-        length = NOISE * (abs(p) + abs(q) + self.params.d / 2) + FLOOR
+        length = self.surface(x)
         speed = NOISE * (abs(x[DP]) + abs(x[DQ])) + FLOOR
         z = [damper.deflection(RIGHT, p, q), damper.deflection(LEFT, p, q), UNUSED, x[DP], UNUSED]
         levels = [length, length, 0.0, FLOOR, 0.0]
@@ -210,17 +216,19 @@ class Run:
         return approach_sign(self.eq.params.K, self.eq.params.C, x[P] - y, x[DP] - v, side)
 
     def _switch_due(self, y: float, v: float) -> Optional[int]:
-        """The phase to switch to now, or None (docs/model.md sections 3.6-3.7)."""
+        """The phase to switch to now, or None (docs/model.md sections 3.6-3.7): a barrier crossed
+        beyond rounding, or touched within it with the relative motion into it (out of it, in
+        contact)."""
         x, damper = self.x, self.eq.damper
-        tol = SURFACE * damper.params.d
+        touch = self.eq.surface(x)
         if self.side == FREE:
             for side in (RIGHT, LEFT):
                 gap = damper.deflection(side, x[P], x[Q])
-                if gap > tol or (gap >= -tol and self._approach(side, y, v) > 0):
+                if gap > touch or (gap >= -touch and self._approach(side, y, v) > 0):
                     return side
             return None
         delta = damper.deflection(self.side, x[P], x[Q])
-        if delta < -tol or (delta <= tol and self._approach(self.side, y, v) < 0):
+        if delta < -touch or (delta <= touch and self._approach(self.side, y, v) < 0):
             return FREE
         return None
 
