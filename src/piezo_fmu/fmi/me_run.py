@@ -24,9 +24,10 @@ from piezo_fmu.solver.metrics import MetricAccumulators
 
 #: Indices of the continuous states (:data:`piezo_fmu.fmi.variables.STATES`).
 P, DP, Q, DQ, V_LEFT, V_RIGHT, D_C, D_CEQ, W_BASE, H_LEFT, H_RIGHT, CONVERTED = range(len(STATES))
-#: A switch puts the impact mass on the barrier's surface where it left it within this fraction of
-#: the gap of it: a host's event location lands well within it (CVode's, 1e-13 s, moves a body at
-#: 1 m/s by 1e-13 m). Whether it touches is decided at the deflection's rounding level.
+#: A deflection within this fraction of the gap of zero may be the host's error (its event location:
+#: CVode's, 1e-13 s, moves a body at 1 m/s by 1e-13 m; its integration error in contact): a body
+#: that far into a barrier or out of it is not switched against its relative motion, and a switch
+#: puts it on the surface. Whether a body short of a barrier touches it is decided at rounding.
 SURFACE = 1e-9
 #: A relative velocity under this many ulp of the velocities is zero (the solver's rounding level).
 NOISE = 64 * 2.0**-52
@@ -217,18 +218,19 @@ class Run:
 
     def _switch_due(self, y: float, v: float) -> Optional[int]:
         """The phase to switch to now, or None (docs/model.md sections 3.6-3.7): a barrier crossed
-        beyond rounding, or touched within it with the relative motion into it (out of it, in
-        contact)."""
+        beyond :data:`SURFACE` (the host's error), or reached, within the deflection's rounding or
+        beyond it, with the relative motion into it (out of it, in contact). A body short of a
+        barrier by more than rounding has not reached it, however fast it closes."""
         x, damper = self.x, self.eq.damper
-        touch = self.eq.surface(x)
+        tol, touch = SURFACE * damper.params.d, self.eq.surface(x)
         if self.side == FREE:
             for side in (RIGHT, LEFT):
                 gap = damper.deflection(side, x[P], x[Q])
-                if gap > touch or (gap >= -touch and self._approach(side, y, v) > 0):
+                if gap > tol or (gap >= -touch and self._approach(side, y, v) > 0):
                     return side
             return None
         delta = damper.deflection(self.side, x[P], x[Q])
-        if delta < -touch or (delta <= touch and self._approach(self.side, y, v) < 0):
+        if delta < -tol or (delta <= touch and self._approach(self.side, y, v) < 0):
             return FREE
         return None
 
