@@ -57,7 +57,7 @@ def test_model_exchange_in_cvode_converges_to_the_exact_core_as_the_tolerance_sh
     table = errors(nominal, core)
     # Measured (this machine): impacts 33, 31, 30, 30 (core 30); first impact off by 2.4e-7, 7.8e-9,
     # 1.2e-10, 3.4e-12 s; the first ten by 6.1e-4, 7.7e-6, 5.2e-7, 1.3e-8 s; V_rms 4.7e-2, 2.0e-2,
-    # 6.5e-4, 2.5e-5 and DI 8.8e-4, 9.0e-7, 6.6e-7, 9.9e-9 relative. Later impacts are off by more:
+    # 6.5e-4, 2.5e-5 and DI 8.8e-4, 9.0e-7, 6.7e-7, 9.9e-9 relative. Later impacts are off by more:
     # each impact amplifies a difference (docs/model.md section 8), as between two exact runs.
     assert [table[rtol]["count"] for rtol in (1e-10, 1e-12)] == [core.readings()["impact_count"]] * 2
     assert all(abs(row["count"] - 30) <= 3 for row in table.values())
@@ -74,7 +74,7 @@ def test_model_exchange_in_cvode_converges_to_the_exact_core_as_the_tolerance_sh
 def test_the_energy_ledger_closes_to_the_tolerance_under_the_quasi_static_model(nominal, core):
     table = errors(nominal, core)
     worst = [table[rtol]["ledger"] for rtol in RTOLS]  # the largest |energy_balance_error| over the run
-    # Measured: 4.2e-4, 3.5e-6, 2.6e-7, 5.1e-9 of the initial energy (50 mJ).
+    # Measured: 4.2e-4, 3.5e-6, 2.6e-7, 5.0e-9 of the initial energy (50 mJ).
     assert worst == sorted(worst, reverse=True)
     assert worst[0] < 1e-3 and worst[2] < 1e-6 and worst[3] < 2e-8, worst
 
