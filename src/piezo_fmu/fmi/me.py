@@ -21,6 +21,9 @@ the metric accumulators of the solver give the outputs.
   a falling zero of the one in contact a separation), ``delta'`` in contact (its falling zero is
   the peak deflection), ``p'`` (its falling zeros are the maxima of ``p``), and ``V'`` of the
   barrier in contact under the circuit models (peak ``|V|``); 1 where a phase does not use one.
+  Within its rounding level of zero an indicator reads that level, signed by the side it is held
+  on (:func:`piezo_fmu.fmi.me_run.held`): no host sees an exact zero, nor a crossing that rounding
+  alone makes.
 
 An event update decides from the state which event happened (the direction of a crossing from
 the relative velocity, docs/model.md section 3.6), applies the switch rules, and records impacts,

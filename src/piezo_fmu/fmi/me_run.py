@@ -103,7 +103,7 @@ class Equations:
                 dx[CONVERTED] = self.chi * (v_right if side == RIGHT else v_left) * rate
         return dx
 
-    def indicators(self, x: list, side: int, signs: tuple = (1, 1, 1)) -> list:
+    def indicators(self, x: list, side: int, signs) -> list:
         """The event indicators (:data:`~piezo_fmu.fmi.variables.INDICATORS`), each :func:`held` within
         its rounding level: the deflections on the side of the phase (positive in contact with
         their barrier), the three rates on the sides ``signs`` (deflection rate, ``p'``, ``V'``)."""
