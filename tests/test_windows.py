@@ -27,6 +27,8 @@ environment with an empty ``WINEPATH``.
 6. fmpy installs into that CPython (its wheel carries Windows binaries; with ``attrs`` and
    ``lxml``): there, in a Python host, the loader finds the interpreter already in the process
    and both FMUs, in one process, agree with fmpy on Linux in both cases.
+7. The FMI 3.0 FMU as Model Exchange in that fmpy's CVode (its Windows build of SUNDIALS): the
+   nominal case and a start on a barrier's surface agree with the same runs on Linux.
 """
 
 from __future__ import annotations
@@ -349,6 +351,45 @@ def test_in_fmpy_on_windows_both_fmus_use_the_python_of_the_process_and_agree_wi
     for version in FMUS:
         assert_agrees_with_linux(tmp_path / f"nominal{version}.csv", "nominal")
         assert_agrees_with_linux(tmp_path / f"harmonic{version}.csv", "harmonic")
+
+
+IN_FMPY_ME = """
+import sys
+from pathlib import Path
+sys.modules["_wmi"] = None
+import numpy as np
+from fmpy import simulate_fmu
+fmu, out, cases = sys.argv[1], Path(sys.argv[2]), %r
+for name, values in cases.items():
+    result = simulate_fmu(fmu, fmi_type="ModelExchange", relative_tolerance=1e-10, stop_time=0.5, output_interval=1e-3,
+                          record_events=False, start_values=values, output=%r)
+    np.savetxt(out / (name + ".csv"), np.column_stack([result[key] for key in ["time", *%r]]), delimiter=",")
+"""
+#: The Model Exchange runs on both platforms: the nominal start, and the impact mass on the left
+#: barrier's surface leaving it at 1e-13 m/s (``test_model_exchange.py``).
+ME_CASES = {"nominal": {}, "on_the_barrier": {"p0": -2e-3, "dp0": 0.1, "q0": -6e-3, "dq0": 0.1 + 1e-13,
+                                               "voltage_model": 1, "R_load": 3.59e6}}
+ME_OUTPUTS = ["main_displacement", "impactor_displacement", "impact_count", "voltage_rms"]
+
+
+def test_model_exchange_in_fmpy_on_windows_agrees_with_linux(python_with_fmpy, tmp_path):
+    from fmpy import simulate_fmu
+
+    script = tmp_path / "me.py"
+    script.write_text(IN_FMPY_ME % (ME_CASES, ME_OUTPUTS, ME_OUTPUTS))
+    completed = windows.run([str(windows.WINE), str(python_with_fmpy / "python.exe"), windows.windows_path(script),
+                             windows.windows_path(FMUS[3]), windows.windows_path(tmp_path)], timeout=600)
+    assert completed.returncode == 0, completed.stderr
+    for name, values in ME_CASES.items():
+        ours = np.loadtxt(tmp_path / f"{name}.csv", delimiter=",")
+        theirs = simulate_fmu(str(FMUS[3]), fmi_type="ModelExchange", relative_tolerance=1e-10, stop_time=0.5,
+                              output_interval=1e-3, record_events=False, start_values=values, output=ME_OUTPUTS)
+        assert np.array_equal(ours[:, 0], theirs["time"]) and theirs["time"][-1] == 0.5
+        assert np.array_equal(ours[:, 3], theirs["impact_count"]) and theirs["impact_count"][-1] >= 4, name
+        # Measured: V_rms 3e-13 relative, the displacements 4e-15 m apart (nominal).
+        assert np.all(np.abs(ours[:, 4] - theirs["voltage_rms"]) <= 1e-8 * np.abs(theirs["voltage_rms"])), name
+        assert np.max(np.abs(ours[:, 1:3] - np.column_stack([theirs["main_displacement"],
+                                                              theirs["impactor_displacement"]]))) <= 1e-9, name
 
 
 def test_fmi2_and_fmi3_fmus_in_one_windows_process_share_one_interpreter(python, tmp_path):
