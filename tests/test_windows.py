@@ -254,23 +254,30 @@ def test_without_a_usable_python_instantiation_fails_with_what_was_tried_and_wha
     assert failure == f"native_host: {INSTANTIATE[version]} failed"
 
 
-def test_a_run_whose_wine_failed_at_exit_is_run_once_more_and_nothing_else_is(tmp_path):
-    # The command stands in for Wine: the first run ends as Wine's loader did once in a suite
-    # (windows.wine_failed_at_exit), the second as the program meant to; a count file tells them apart.
+@pytest.mark.parametrize("status, failure", [(127, windows.WINE_EXIT_ASSERTION), (1, "wine client error:114: "),
+                                             (1, "wine client error:2c: read: Connection reset by peer")],
+                         ids=["loader assertion", "client error", "client error with errno"])
+def test_a_run_in_which_wine_failed_is_run_once_more_and_nothing_else_is(tmp_path, status, failure):
+    # The command stands in for Wine: the first run ends as Wine did once in a suite
+    # (windows.wine_failed), the second as the program meant to; a count file tells them apart.
     count = tmp_path / "count"
     script = ('n=$(cat "$0" 2>/dev/null || echo 0); echo $((n + 1)) > "$0"; echo "host: instantiate failed" >&2; '
-              '[ "$n" = 0 ] && { echo "$1" >&2; exit 127; }; exit 1')
-    with pytest.warns(UserWarning, match="Wine failed at exit"):
-        completed = windows.run(["sh", "-c", script, str(count), windows.WINE_EXIT_ASSERTION])
+              f'[ "$n" = 0 ] && {{ echo "$1" >&2; exit {status}; }}; exit 1')
+    with pytest.warns(UserWarning, match="Wine failed"):
+        completed = windows.run(["sh", "-c", script, str(count), failure])
     assert completed.returncode == 1 and completed.stderr == "host: instantiate failed\n"
     assert count.read_text() == "2\n"
-    # Any other failure is the answer, run once: another status, or the assertion not the last line.
-    for status, last in ((127, "something else"), (134, windows.WINE_EXIT_ASSERTION)):
-        count.unlink()
+
+
+def test_any_other_failure_is_the_answer_run_once(tmp_path):
+    count = tmp_path / "count"
+    # Another status with the loader's assertion, or the assertion or the client error not the last line.
+    for status, last in ((127, "something else"), (134, windows.WINE_EXIT_ASSERTION), (1, "a wine client error:1: x")):
         completed = windows.run(["sh", "-c", f'echo 1 > "$0"; echo "$1" >&2; exit {status}', str(count), last])
         assert completed.returncode == status and count.read_text() == "1\n"
-    completed = windows.run(["sh", "-c", 'echo "$0" >&2; echo after >&2; exit 127', windows.WINE_EXIT_ASSERTION])
-    assert completed.returncode == 127 and not windows.wine_failed_at_exit(completed)
+    for failure in (windows.WINE_EXIT_ASSERTION, "wine client error:114: "):
+        completed = windows.run(["sh", "-c", 'echo "$0" >&2; echo after >&2; exit 127', failure])
+        assert completed.returncode == 127 and not windows.wine_failed(completed)
 
 
 # -- statuses and instances -------------------------------------------------------------------------

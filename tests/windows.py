@@ -17,6 +17,7 @@ of the standalone FMUs' Windows runtime (:mod:`piezo_fmu.build.runtimes`).
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import warnings
@@ -117,28 +118,38 @@ WINE_EXIT_ASSERTION = ("Inconsistency detected by ld.so: dl-fini.c: 87: _dl_fini
                        "`ns != LM_ID_BASE || i == nloaded' failed!")
 
 
-def wine_failed_at_exit(completed: subprocess.CompletedProcess) -> bool:
-    """Whether Wine's Linux side failed in ``exit()`` after the Windows program had left: exit
-    status 127 with the loader's assertion as the last line of stderr. On 2026-11-27 one run of
-    the C host under Wine in a whole suite (2 workers) ended so, after it had printed everything it
-    had to; 160 runs of the same command alone (two at a time) did not. Windows has no such
-    loader: the program's own exit status is lost, not wrong."""
+#: The line Wine's client writes when it loses its wine server, before it aborts the thread
+#: (``server_protocol_error`` and ``server_protocol_perror`` in Wine's ntdll).
+WINE_CLIENT_ERROR = re.compile(r"wine client error:[0-9a-f]+: ")
+
+
+def wine_failed(completed: subprocess.CompletedProcess) -> bool:
+    """Whether Wine's Linux side failed, not the Windows program: exit status 127 with the loader's
+    assertion as the last line of stderr (in ``exit()``, after the program had left), or Wine's
+    client error as the last line (any status). On 2026-11-27 one run of the C host under Wine in
+    a whole suite (2 workers) ended the first way, after it had printed everything it had to; 160
+    runs of the same command alone (two at a time) did not. On 2026-11-28 one run in a whole suite
+    ended the second way, after the host had printed everything and exited with its status 1.
+    Windows has neither: the program's own result is lost, not wrong."""
     lines = completed.stderr.rstrip("\n").splitlines()
-    return completed.returncode == 127 and bool(lines) and lines[-1] == WINE_EXIT_ASSERTION
+    if not lines:
+        return False
+    return (completed.returncode == 127 and lines[-1] == WINE_EXIT_ASSERTION) or bool(WINE_CLIENT_ERROR.match(lines[-1]))
 
 
 def run(command: Sequence[str], extra: Optional[Mapping[str, str]] = None, timeout: float = 600,
         cwd: Optional[Path] = None) -> subprocess.CompletedProcess:
     """Run ``command`` (a Windows program through ``WINE``, or Wine's tools) in the bare environment;
-    its exit status is not checked. A run whose Wine failed at exit (:func:`wine_failed_at_exit`)
-    is run once more, with a warning that the suite's summary shows; the second run's result is
-    the answer, whatever it is."""
+    its exit status is not checked. A run in which Wine itself failed (:func:`wine_failed`) is run
+    once more, with a warning that the suite's summary shows; the second run's result is the
+    answer, whatever it is."""
     def once() -> subprocess.CompletedProcess:
         return subprocess.run(list(command), env=environment(extra), stdin=subprocess.DEVNULL, capture_output=True,
                               text=True, timeout=timeout, cwd=cwd)
 
     completed = once()
-    if wine_failed_at_exit(completed):
-        warnings.warn(f"Wine failed at exit (status 127, {WINE_EXIT_ASSERTION!r}) after {command[1:2]}; run again")
+    if wine_failed(completed):
+        last = completed.stderr.rstrip("\n").splitlines()[-1]
+        warnings.warn(f"Wine failed (status {completed.returncode}, {last!r}) after {command[1:2]}; run again")
         completed = once()
     return completed
