@@ -6,6 +6,10 @@ momentum-exact, its ledger closes, its state is saved, it never crashes the host
   tightest tolerances, impact times, ``V_rms`` and DI closer at each. Impact times are read from
   the outputs: fmpy records a row just before and just after every event update, and an impact is
   the event at which ``impact_count`` steps up.
+- Starts on a barrier's surface (leaving it at a rate that rounding turns back, or none) and a
+  picometre short of one: in CVode the run ends, meets the core's impacts and ends within 1e-9 m
+  of it, and the impact mass is never beyond a barrier in free flight (the indicators are held at
+  their rounding level, docs/fmu.md).
 - Every event update conserves the total momentum of the main and the impact body, each with its
   mass in the phase before and after (docs/model.md section 3.2), to rounding; positions do not
   move beyond the snap onto the barrier's surface.
