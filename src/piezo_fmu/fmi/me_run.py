@@ -157,7 +157,7 @@ class Run:
         self.acc = MetricAccumulators()
         self.peak_deflection = self.peak_voltage = 0.0
         self.rising = self._rising(y0, v0)  # a zero of p' at the start is no maximum
-        self.signs = [1, 1 if self.rising else -1, 1]  # the sides the rates' indicators are held on
+        self.signs = self._first_signs()  # the sides the rates' indicators are held on
 
     # -- the event update -------------------------------------------------------------------------
 
@@ -202,6 +202,10 @@ class Run:
         volt = self.signs[2] if abs(values[4]) <= levels[4] else (1 if values[4] > 0.0 else -1)
         contact = self.side != FREE and self._approach(self.side, y, v) < 0
         self.signs = [-1 if contact else 1, 1 if self.rising else -1, volt]
+
+    def _first_signs(self) -> list:
+        """The held sides before any event update: ``p'`` by whether ``p`` rises, the others positive."""
+        return [1, 1 if self.rising else -1, 1]
 
     def indicators(self) -> list:
         """The event indicators now (:meth:`Equations.indicators`)."""
@@ -342,7 +346,9 @@ class Run:
         self.plastic, self.initial = float(data["plastic"]), float(data["initial"])
         self.acc = MetricAccumulators.from_dict(data["acc"])
         self.peak_deflection, self.peak_voltage = float(data["peak_deflection"]), float(data["peak_voltage"])
-        self.rising, self.signs = bool(data["rising"]), [int(sign) for sign in data["signs"]]
+        self.rising = bool(data["rising"])
+        # A state saved before the indicators were held (0.2.0 development) has no sides: those of a start.
+        self.signs = [int(sign) for sign in data["signs"]] if "signs" in data else self._first_signs()
 
     @classmethod
     def of_core(cls, sim) -> "Run":
