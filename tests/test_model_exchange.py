@@ -268,7 +268,7 @@ def test_the_model_exchange_state_is_saved_and_restored(tmp_path):
 
 
 def test_a_model_exchange_state_saved_without_held_sides_restores_with_those_of_a_start():
-    """A state saved before the indicators were held (0.2.0 development) has no ``signs``: it
+    """A state saved before the indicators were held (0.2.0 development) has no held sides: it
     restores, with the sides a run starts with, instead of failing with a fatal status."""
     from piezo_fmu.fmi.me_run import Equations, Run
     from piezo_fmu.model.damper import Damper
@@ -276,15 +276,15 @@ def test_a_model_exchange_state_saved_without_held_sides_restores_with_those_of_
     equations = Equations(Damper.of(Parameters(voltage_model=1, dp0=-0.1)))
     run = Run(equations, 0.0, 0.0, 0.0)
     run.update(0.0, 0.0)
-    run.signs = [-1, 1, -1]  # as an event update may leave them
+    run.held = [-1, -1]  # as an event update may leave them
     old = run.snapshot()
-    del old["signs"]
+    del old["held"]
     restored = Run(equations, 0.0, 0.0, 0.0)
     restored.restore(old)
     assert restored.x == run.x and restored.side == run.side and restored.rising == run.rising is False
     assert restored.signs == [1, -1, 1] and restored.indicators() == equations.indicators(run.x, run.side, [1, -1, 1])
     restored.restore(run.snapshot())
-    assert restored.signs == [-1, 1, -1]
+    assert restored.signs == [-1, -1, -1]
 
 
 def test_fmpy_co_simulation_in_event_mode_stays_co_simulation():

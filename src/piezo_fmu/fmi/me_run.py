@@ -157,7 +157,7 @@ class Run:
         self.acc = MetricAccumulators()
         self.peak_deflection = self.peak_voltage = 0.0
         self.rising = self._rising(y0, v0)  # a zero of p' at the start is no maximum
-        self.signs = self._first_signs()  # the sides the rates' indicators are held on
+        self.held = [1, 1]  # the sides the indicators of delta' and V' are held on (p''s: self.rising)
 
     # -- the event update -------------------------------------------------------------------------
 
@@ -195,17 +195,18 @@ class Run:
         return x[Q] != q
 
     def _hold(self, y: float, v: float) -> None:
-        """The sides the rates' indicators are held on until the next event: where each is heading
-        (``delta'`` by the approach rule, ``p'`` by whether ``p`` rises), or, for ``V'``, the side
-        its value is on (unchanged while within rounding)."""
+        """The sides the indicators of ``delta'`` and ``V'`` are held on until the next event:
+        where ``delta'`` is heading (by the approach rule), and the side ``V'``'s value is on
+        (unchanged while within rounding). ``p'``'s is where it is heading, ``self.rising``."""
         values, levels = self.eq.values(self.x, self.side)
-        volt = self.signs[2] if abs(values[4]) <= levels[4] else (1 if values[4] > 0.0 else -1)
+        volt = self.held[1] if abs(values[4]) <= levels[4] else (1 if values[4] > 0.0 else -1)
         contact = self.side != FREE and self._approach(self.side, y, v) < 0
-        self.signs = [-1 if contact else 1, 1 if self.rising else -1, volt]
+        self.held = [-1 if contact else 1, volt]
 
-    def _first_signs(self) -> list:
-        """The held sides before any event update: ``p'`` by whether ``p`` rises, the others positive."""
-        return [1, 1 if self.rising else -1, 1]
+    @property
+    def signs(self) -> list:
+        """The sides the three rates' indicators are held on: ``delta'``, ``p'``, ``V'``."""
+        return [self.held[0], 1 if self.rising else -1, self.held[1]]
 
     def indicators(self) -> list:
         """The event indicators now (:meth:`Equations.indicators`)."""
@@ -339,7 +340,7 @@ class Run:
         """The whole state, JSON-safe."""
         return {"t": self.t, "x": list(self.x), "side": self.side, "plastic": self.plastic, "initial": self.initial,
                 "acc": self.acc.to_dict(), "peak_deflection": self.peak_deflection,
-                "peak_voltage": self.peak_voltage, "rising": self.rising, "signs": list(self.signs)}
+                "peak_voltage": self.peak_voltage, "rising": self.rising, "held": list(self.held)}
 
     def restore(self, data: dict) -> None:
         self.t, self.x, self.side = float(data["t"]), [float(value) for value in data["x"]], int(data["side"])
@@ -348,7 +349,7 @@ class Run:
         self.peak_deflection, self.peak_voltage = float(data["peak_deflection"]), float(data["peak_voltage"])
         self.rising = bool(data["rising"])
         # A state saved before the indicators were held (0.2.0 development) has no sides: those of a start.
-        self.signs = [int(sign) for sign in data["signs"]] if "signs" in data else self._first_signs()
+        self.held = [int(sign) for sign in data.get("held", (1, 1))]
 
     @classmethod
     def of_core(cls, sim) -> "Run":
