@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from fmpy_march import Marcher, ends_as_labelled, reaches
-from fmu_host import assert_refused, run_cli
+from fmu_host import DEFECTIVE_C_EQ, assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
 from piezo_fmu_harness.periodic.band import linear_transmissibility
@@ -154,7 +154,9 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
     (["--ratio", "1.2", "--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--ratio", "1.2", "--amplitude", "0"], ["--amplitude 0", "allowed range (0, inf) m"]),
     (["--ratio", "1.2", "--device", "gpu"], ["--device gpu", "numba", "GPU"]),
-    (["--ratio", "1.2", "--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
+    (["--ratio", "1", "--set", "C=0"], ["C = 0.0 N.s/m", "w/w_n = 1", "no bounded response", "allowed: C > 0"]),
+    (["--ratio", "1.2", "--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
+     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq by a part in a million"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fmpy_march import Marcher, nudged, settled
-from fmu_host import assert_refused, run_cli
+from fmu_host import DEFECTIVE_C_EQ, assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
 from piezo_fmu_harness.studies.bifurcation.study import CLASSES, CLOUD
@@ -176,7 +176,8 @@ def test_the_persistence_check_finds_a_claim_that_reaches_an_orbit(diagram, tmp_
     (["--set", "m=-1"], ["m = -1.0 is not above 0", "allowed range (0, inf] kg"]),
     (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
     (["--jobs", "0"], ["--jobs 0", "worker", "allowed range [1, inf)"]),
-    (["--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
+    (["--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
+     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq by a part in a million"]),
     (["--device", "gpu"], ["--device gpu", "numba", "GPU"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fmpy_march import Marcher, ends_as_labelled, reaches
-from fmu_host import assert_refused, run_cli
+from fmu_host import DEFECTIVE_C_EQ, assert_refused, run_cli
 
 from piezo_fmu_harness.datasets import open_dataset
 from piezo_fmu_harness.studies.fractions.study import FractionSpec
@@ -186,7 +186,8 @@ def test_an_interrupted_study_resumes_to_the_same_fractions(fractions, tmp_path)
     (["--seed", "-1"], ["--seed -1", "allowed range [0, inf)"]),
     (["--confirm", "-2"], ["--confirm -2", "allowed range [0, inf)"]),
     (["--set", "d=-0.01"], ["d = -0.01 is not above 0"]),
-    (["--set", "C=0", "--set", "C_eq=0"], ["C = 0.0", "not damped", "the scalar core and the FMUs take this damper", "give C > 0"]),
+    (["--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
+     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq by a part in a million"]),
 ])
 def test_bad_fractions_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -92,12 +92,13 @@ def load_value(model, value: float, option: str) -> float:
 def engine_damper(values: dict, why_not) -> None:
     """The damper ``values`` (the FMU's defaults and ``--set``), refused before any work when
     ``why_not(values)`` (the batch engine's own test: the modes of its contact must be distinct and
-    decaying; None, from an FMU whose engine has no such test) says why the engine cannot take it."""
+    none may grow; None, from an FMU whose engine has no such test) says why the engine cannot take it.
+    A passive contact never grows, so what it refuses is a contact damped so close to critically
+    that two of its modes coincide."""
     message = why_not(values) if why_not is not None else None
     if message:
-        hint = ("; give C > 0: the main mass's damping makes every mode of the contact decay"
-                if float(values.get("C", 1.0)) == 0.0 else "")
-        raise UsageError(f"--set: {message}{hint}")
+        raise UsageError(f"--set: {message}; two of the contact's modes coincide (C_eq at its critical "
+                         "damping): move C_eq by a part in a million")
 
 
 def worker_count(args) -> int:

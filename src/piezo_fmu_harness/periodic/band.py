@@ -99,6 +99,11 @@ def wide_gap(spec_amplitude: float, peak_transmissibility: float) -> float:
     return max(1.0, 4.0 * spec_amplitude * peak_transmissibility)
 
 
+#: The largest linear transmissibility a band may reach: beyond it the main mass is undamped within
+#: rounding of its resonance (``1 / |1 - r^2|`` for ``C = 0``, ``r`` given to 12 digits).
+UNBOUNDED = 1e12
+
+
 def linear_transmissibility(omega, M: float, K: float, C: float):
     """``|X/Y|`` of the base-excited oscillator (absolute displacement over base amplitude)."""
     omega = np.asarray(omega, float)
@@ -201,8 +206,15 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     natural = math.sqrt(parameters["K"] / parameters["M"])
     ratios = tuple(float(f"{r:.12g}") for r in (np.linspace(lo, hi, count) if count > 1 else [lo]))
     peak_y = amplitude if amplitude is not None else acceleration / (lo * natural) ** 2
-    peak = float(np.max(linear_transmissibility(np.linspace(lo, hi, 4001) * natural, parameters["M"],
-                                                   parameters["K"], parameters["C"])))
+    with np.errstate(divide="ignore"):
+        fine, at = (linear_transmissibility(np.asarray(r) * natural, parameters["M"], parameters["K"], parameters["C"])
+                    for r in (np.linspace(lo, hi, 4001), ratios))
+    peak = float(np.max(fine, where=fine <= UNBOUNDED, initial=0.0))  # a fine point at an undamped resonance aside
+    if not np.all(at <= UNBOUNDED):
+        raise UsageError(f"--set C = {parameters['C']!r} N.s/m with w/w_n = 1 among the frequencies: the main mass "
+                         "alone, undamped, has no bounded response at its resonance (the runs without the damper, "
+                         "and a basin grid's default span, need one); allowed: C > 0, or frequencies that leave out "
+                         "w/w_n = 1")
     spec = FrequencySpec(ratios=ratios, natural=natural, amplitude=amplitude, acceleration=acceleration,
                             values=values, wide_gap=wide_gap(peak_y, peak),
                             settings=Settings(samples=samples, tolerance=tolerance, max_cycles=cycles,
