@@ -66,12 +66,15 @@ class LinearPhase:
         terms = np.empty((_DOUBLED, n, n))
         terms[0] = np.eye(n)
         # A^k / k! by doubling: with the first m terms, A^(m+j) / (m+j)! = (A^m / m!) (A^j / j!) / C(m+j, m).
+        # Beyond double range (a stiffness of 1e300) the terms overflow: the integrator refuses such a
+        # phase, naming the parameters and their range, so numpy's warning would only precede it.
         m = 1
-        while m <= ORDER:
-            top = terms[m - 1] @ (self.A / m)
-            np.matmul(top, terms[:m], out=terms[m:2 * m])
-            terms[m:2 * m] *= _INVERSE_BINOMIALS[m]
-            m *= 2
+        with np.errstate(over="ignore", invalid="ignore"):
+            while m <= ORDER:
+                top = terms[m - 1] @ (self.A / m)
+                np.matmul(top, terms[:m], out=terms[m:2 * m])
+                terms[m:2 * m] *= _INVERSE_BINOMIALS[m]
+                m *= 2
         # (A^k / k!) stacked so that one product gives every Taylor coefficient of x.
         self._set_terms(terms[:ORDER + 1])
 
