@@ -212,9 +212,9 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     peak = float(np.max(fine, where=fine <= UNBOUNDED, initial=0.0))  # a fine point at an undamped resonance aside
     if not np.all(at <= UNBOUNDED):
         raise UsageError(f"--set C = {parameters['C']!r} N.s/m with w/w_n = 1 among the frequencies: the main mass "
-                         "alone, undamped, has no bounded response at its resonance (the runs without the damper, "
-                         "and a basin grid's default span, need one); allowed: C > 0, or frequencies that leave out "
-                         "w/w_n = 1")
+                         "alone, undamped, has no bounded response at its resonance, and the studies measure "
+                         "against it (the runs without the damper, the motion without impacts, a basin grid's "
+                         "span); allowed: C > 0, or frequencies that leave out w/w_n = 1")
     spec = FrequencySpec(ratios=ratios, natural=natural, amplitude=amplitude, acceleration=acceleration,
                             values=values, wide_gap=wide_gap(peak_y, peak),
                             settings=Settings(samples=samples, tolerance=tolerance, max_cycles=cycles,
