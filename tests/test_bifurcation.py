@@ -177,7 +177,7 @@ def test_the_persistence_check_finds_a_claim_that_reaches_an_orbit(diagram, tmp_
     (["--confirm", "-1"], ["--confirm -1", "allowed range [0, inf)"]),
     (["--jobs", "0"], ["--jobs 0", "worker", "allowed range [1, inf)"]),
     (["--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
-     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq by a part in a million"]),
+     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq or R_load by a part in a million"]),
     (["--device", "gpu"], ["--device gpu", "numba", "GPU"]),
 ])
 def test_bad_bifurcation_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):

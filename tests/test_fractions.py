@@ -187,7 +187,7 @@ def test_an_interrupted_study_resumes_to_the_same_fractions(fractions, tmp_path)
     (["--confirm", "-2"], ["--confirm -2", "allowed range [0, inf)"]),
     (["--set", "d=-0.01"], ["d = -0.01 is not above 0"]),
     (["--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
-     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq by a part in a million"]),
+     ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq or R_load by a part in a million"]),
 ])
 def test_bad_fractions_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -93,12 +93,12 @@ def engine_damper(values: dict, why_not) -> None:
     """The damper ``values`` (the FMU's defaults and ``--set``), refused before any work when
     ``why_not(values)`` (the batch engine's own test: the modes of its contact must be distinct and
     none may grow; None, from an FMU whose engine has no such test) says why the engine cannot take it.
-    A passive contact never grows, so what it refuses is a contact damped so close to critically
-    that two of its modes coincide."""
+    A passive contact never grows, so what it refuses is a contact whose modes coincide (to some
+    1e-8): damped critically, or with a circuit as fast as one of its modes."""
     message = why_not(values) if why_not is not None else None
     if message:
-        raise UsageError(f"--set: {message}; two of the contact's modes coincide (C_eq at its critical "
-                         "damping): move C_eq by a part in a million")
+        raise UsageError(f"--set: {message}; two of the contact's modes coincide (a contact damped "
+                         "critically, or a circuit as fast as a mode): move C_eq or R_load by a part in a million")
 
 
 def worker_count(args) -> int:
