@@ -116,10 +116,10 @@ class Equations:
         cancellation makes it, and the indicator is the output's value but for an exact zero)."""
         damper, p, q = self.damper, x[P], x[Q]
         length = self.surface(x)
-        speed = NOISE * (abs(x[DP]) + abs(x[DQ])) + FLOOR
         z = [damper.deflection(RIGHT, p, q), damper.deflection(LEFT, p, q), UNUSED, x[DP], UNUSED]
         levels = [length, length, 0.0, FLOOR, 0.0]
         if side != FREE:
+            speed = NOISE * (abs(x[DP]) + abs(x[DQ])) + FLOOR
             rate = self.deflection_rate(x, side)
             z[2], levels[2] = rate, speed
             if self.circuit:

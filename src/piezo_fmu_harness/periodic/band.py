@@ -102,8 +102,6 @@ def wide_gap(spec_amplitude: float, peak_transmissibility: float) -> float:
 #: The largest linear transmissibility a band may reach: beyond it the main mass is undamped within
 #: rounding of its resonance (``1 / |1 - r^2|`` for ``C = 0``, ``r`` given to 12 digits).
 UNBOUNDED = 1e12
-#: The damping (of ``sqrt(K M)``) that keeps the transmissibility at resonance within it.
-UNBOUNDED_DAMPING = 1.0 / UNBOUNDED
 
 
 def linear_transmissibility(omega, M: float, K: float, C: float):
@@ -213,7 +211,7 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
                     for r in (np.linspace(lo, hi, 4001), ratios))
     peak = float(np.max(fine, where=fine <= UNBOUNDED, initial=0.0))  # a fine point at an undamped resonance aside
     if not np.all(at <= UNBOUNDED):
-        least = UNBOUNDED_DAMPING * math.sqrt(parameters["K"] * parameters["M"])
+        least = math.sqrt(parameters["K"] * parameters["M"]) / UNBOUNDED  # C at which K / (C w_n) is UNBOUNDED
         raise UsageError(f"--set C = {parameters['C']!r} N.s/m with w/w_n = {ratios[int(np.argmax(at))]:g} among the "
                          "frequencies: the main mass alone, (all but) undamped, has no bounded response at its "
                          "resonance, and the studies measure against it (the runs without the damper, the motion "
