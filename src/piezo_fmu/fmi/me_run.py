@@ -18,6 +18,7 @@ from typing import Optional
 from piezo_fmu.fmi.variables import INDICATORS, STATES
 from piezo_fmu.model.damper import FREE, LEFT, RIGHT, Damper
 from piezo_fmu.model.dynamics import DU, DW, approach_sign
+from piezo_fmu.model.rounding import EPS, MAX_SWITCHES_AT_ONE_INSTANT, NOISE_ULPS
 from piezo_fmu.model.voltage import QUASI_STATIC, circuit_rate, quasi_static
 from piezo_fmu.solver import EnergyLedger
 from piezo_fmu.solver.metrics import MetricAccumulators
@@ -29,10 +30,8 @@ P, DP, Q, DQ, V_LEFT, V_RIGHT, D_C, D_CEQ, W_BASE, H_LEFT, H_RIGHT, CONVERTED = 
 #: that far into a barrier or out of it is not switched against its relative motion, and a switch
 #: puts it on the surface. Whether a body short of a barrier touches it is decided at rounding.
 SURFACE = 1e-9
-#: A relative velocity under this many ulp of the velocities is zero (the solver's rounding level).
-NOISE = 64 * 2.0**-52
-#: Switches allowed at one instant before the run is declared degenerate (as in the solver).
-MAX_SWITCHES_AT_ONE_INSTANT = 8
+#: The rounding level of the indicators, relative to the sizes they are made of (the solver's).
+NOISE = NOISE_ULPS * EPS
 #: The value of an indicator in a phase that does not use it.
 UNUSED = 1.0
 #: The least rounding level of an indicator, so that none is ever shown as an exact zero.

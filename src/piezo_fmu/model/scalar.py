@@ -6,9 +6,7 @@ Pure Python: the run-time core needs numpy only.
 
 from __future__ import annotations
 
-import sys
-
-EPS = sys.float_info.epsilon
+from .rounding import EPS
 
 
 def bracketed(f, lo: float, hi: float, xtol: float = 0.0) -> float:

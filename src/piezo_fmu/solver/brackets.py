@@ -20,17 +20,15 @@ from functools import lru_cache
 import numpy as np
 
 from ..model.dynamics import DU, DW, FREE, LEFT, RIGHT, approach_sign, mirror_signs
+from ..model.rounding import EPS, NOISE_ULPS
 from .propagation import POWERS_AT_START, STATE_TERMS, LinearPhase
 from .roots import _TO_BERNSTEIN, NEWTON_LAST, crossings
 
 #: Non-terminal events: a maximum of ``p``, a peak of ``delta``, a peak of the circuit's ``|V|``.
 MAXIMUM, PEAK, VOLTAGE_PEAK = 0, 1, 2
-#: Rounding level of an event function, in ulp of the largest state term it is made of.
-NOISE_ULPS = 64
 #: Largest size of the terms of a bracket (state, event functions, the ledger's rates): their
 #: squares, in the ledger, stay inside double range.
 STATE_LIMIT = 1e150
-EPS = float(np.finfo(float).eps)
 #: Put off the root searches of free flight until a move may reach a root (:class:`Searches`);
 #: False locates every root when the bracket opens (the same roots: the tests compare both).
 DEFER = True

@@ -24,6 +24,7 @@ import numpy as np
 from ..model.damper import Damper
 from ..model.dynamics import FREE, LEFT, RIGHT, U, mirror_signs
 from ..model.parameters import Parameters
+from ..model.rounding import MAX_SWITCHES_AT_ONE_INSTANT, ZERO
 from ..model.voltage import quasi_static
 from .brackets import DEFER_MARGIN, MAXIMUM, PEAK, VOLTAGE_PEAK, Bracket, BracketMaps, BracketOpener, StateOverflow
 from .circuit import CircuitState
@@ -33,10 +34,6 @@ from .propagation import MIN_BRACKET, POWER_EXPONENTS, POWERS_AT_END, STATE_TERM
 from .records import Impact
 from .roots import horner
 
-#: Switches allowed at one instant before the run is declared degenerate.
-MAX_SWITCHES_AT_ONE_INSTANT = 8
-#: Relative size, against the gap, under which an event function at a bracket start is zero.
-_ZERO = 1e-13
 
 
 class Integrator:
@@ -60,7 +57,7 @@ class Integrator:
         maps = {FREE: BracketMaps(self._free, damper.functionals(FREE), damper.rates(FREE)),
                 RIGHT: BracketMaps(right, damper.functionals(RIGHT), damper.rates(RIGHT))}
         maps[LEFT] = maps[RIGHT].mirrored(self._contact[LEFT], mirror_signs(n))
-        self._opener = BracketOpener(maps, _ZERO * params.d, params.K, params.C)
+        self._opener = BracketOpener(maps, ZERO * params.d, params.K, params.C)
         #: The two patch circuits (voltage_model 1 and 2); None under the quasi-static model 0.
         self._circuit = (CircuitState(self.barrier.chi, self.barrier.C_p, params.R_load, damper.coupled, t0)
                          if params.voltage_model else None)

@@ -18,13 +18,13 @@ import math
 
 import numpy as np
 
+from ..model.rounding import EPS
 from .propagation import ORDER
 
 #: Narrowest interval (in normalised bracket time) that is still halved.
 MIN_WIDTH = 2.0**-40
 #: Absolute tolerance of a refined root in normalised bracket time (with 4 ulp relative).
 XTOL = 2.0**-60
-EPS = float(np.finfo(float).eps)
 #: A Newton step this small (normalised time) is the last one: quadratic convergence.
 NEWTON_LAST = 1e-9
 
