@@ -1,19 +1,18 @@
-"""The compiled kernel against the array engine and the FMU (issues 27 and 32), side by side in one run.
+"""The compiled kernel against the FMU, side by side in one run.
 
     python benchmarks/bench_batch.py [--fmu-starts K] [--studies] [--jobs J]
 
 1. **Throughput against the batch size.** Random starts at 1.2 sqrt(K/M) (the nominal damper,
    ``Y`` = 1 mm, 64 hold steps a period; ``p0`` and ``p0'/w`` within two linear amplitudes, the
-   impact mass at rest in the middle) marched on the compiled kernel (every core) and on the array
-   engine (numpy), 1, 100, 10,000 and 100,000 starts (the array engine not at 100,000), each for
-   about 200,000 start-periods (the array engine 20,000, and 2,000 periods at one start); the first ``K`` of them through the FMU (the harness's drive,
-   fmpy). ``speedup``: the kernel at 10,000 starts over the FMU (target >= 50, issue 27);
-   ``single``: the kernel at 1 start over the FMU (target >= 200, issue 32); the kernel at 10,000
-   starts must reach 1,000,000 start-periods a second on 2 cores.
+   impact mass at rest in the middle) marched on the compiled kernel (every core), 1, 100, 10,000
+   and 100,000 starts, each for about 200,000 start-periods; the first ``K`` of them through the FMU
+   (the harness's drive, fmpy). ``speedup``: the kernel at 10,000 starts over the FMU (target >= 50);
+   ``single``: the kernel at 1 start over the FMU (target >= 200); the kernel at 10,000 starts must
+   reach 1,000,000 start-periods a second on 2 cores.
 2. **JIT compile time**, apart: a fresh process that compiles the kernel into an empty cache, and
    one that finds it in the cache (target below 5 s).
 3. **Agreement.** The ``K`` starts are taken to where they go on the kernel (the rule of
-   ``piezo_fmu.solver.batch.settle``), and the FMU is marched from each until it shows which of
+   ``piezo_fmu.solver.batch.attractors.settle``), and the FMU is marched from each until it shows which of
    those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when no
    FMU label differs from the kernel's while their trajectories were together.
 4. On a machine with an NVIDIA GPU and numba-cuda: the kernel on the GPU at 10,000 and 1,000,000
@@ -23,7 +22,7 @@
 
 Prints one JSON object. The load average before the run is part of it: other programs on the cores
 slow every figure; the CPU seconds of each march are given beside the wall time. Each kernel figure
-is the median of 5 marches (the best beside it); the array engine's and the FMU's are one march.
+is the median of 5 marches (the best beside it); the FMU's is one march.
 """
 
 from __future__ import annotations
@@ -46,7 +45,6 @@ sys.path.insert(0, str(HERE.parent / "src"))  # the packages, when not installed
 
 from piezo_fmu import Parameters  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, describe, device_error, settle  # noqa: E402
-from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble  # noqa: E402
 from piezo_fmu_harness import cli  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
 from piezo_fmu_harness.periodic.confirm import fmu_label  # noqa: E402
@@ -57,9 +55,8 @@ from piezo_fmu_harness.periodic.drive import HarmonicDrive  # noqa: E402
 
 
 
-#: Start-periods each throughput figure marches (the periods are this over the starts, at least 2):
-#: the kernel's, and the array engine's (a hundred times slower at one start).
-WORK, ARRAY_WORK = 200_000, 20_000
+#: Start-periods each throughput figure marches (the periods are this over the starts, at least 2).
+WORK = 200_000
 SIZES = (1, 100, 10_000, 100_000)
 
 
@@ -69,14 +66,13 @@ SIZES = (1, 100, 10_000, 100_000)
 REPEATS = 5
 
 
-def batch_rate(engine, states: np.ndarray, drive: HarmonicHold, device: str = "cpu", keep: list | None = None,
+def batch_rate(states: np.ndarray, drive: HarmonicHold, device: str = "cpu", keep: list | None = None,
                periods: int | None = None) -> dict:
     if periods is None:
-        periods = max(2, WORK // len(states)) if engine is Ensemble else min(2_000, max(2, ARRAY_WORK // len(states)))
-    kwargs = {"device": device}
+        periods = max(2, WORK // len(states))
     runs = []
-    for repeat in range(REPEATS if engine is Ensemble else 1):
-        ens = engine(Parameters(**VALUES), drive, states, **kwargs)
+    for repeat in range(REPEATS):
+        ens = Ensemble(Parameters(**VALUES), drive, states, device=device)
         ens.advance(1)  # first touch: imports, the compiled code
         begin, cpu = time.perf_counter(), time.process_time()
         record = ens.advance(periods)
@@ -188,12 +184,10 @@ def main() -> int:
     instance = Instance(model, unzipdir)
     try:
         fmu = fmu_rate(instance, states[:args.fmu_starts], omega, args.fmu_periods)
-        kernel = {n: batch_rate(Ensemble, states[:n], drive) for n in SIZES}
-        array = {n: batch_rate(ArrayEnsemble, states[:n], drive) for n in SIZES[:-1]}
+        kernel = {n: batch_rate(states[:n], drive) for n in SIZES}
         rate = lambda run: run["start_periods_per_s"]  # noqa: E731
         report = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average_before": load,
-                  "fmu": fmu, "kernel_cpu": list(kernel.values()), "array_engine_cpu": list(array.values()),
-                  "kernel_over_array_engine": {n: rate(kernel[n]) / rate(array[n]) for n in array},
+                  "fmu": fmu, "kernel_cpu": list(kernel.values()),
                   "speedup": rate(kernel[10_000]) / rate(fmu), "single": rate(kernel[1]) / rate(fmu),
                   "jit": compile_times()}
         report.update(agreement(instance, states[:args.fmu_starts], omega))

@@ -1,4 +1,4 @@
-"""Where the bifurcation diagram's time goes (issue 32): its sweeps in one process on one thread,
+"""Where the bifurcation diagram's time goes: its sweeps in one process on one thread,
 the compiled kernel's time apart from the Python between its blocks.
 
     python benchmarks/bench_diagram.py [--count N] [--max-cycles N] [--out DIR] [--fmu FILE] [--bare]
@@ -35,9 +35,10 @@ import time
 from pathlib import Path
 
 #: The pieces of ``settle`` timed (module, function), the kernel launches inside each left out.
-PIECES = (("orbits", "OrbitFinder.newton"), ("orbits", "OrbitFinder.verify"), ("orbits", "OrbitFinder.multipliers"),
-          ("settle", "_find_orbits"), ("settle", "_label_quiet"), ("settle", "_label_orbits"),
-          ("settle", "_extend"), ("settle", "measure"))
+PIECES = (("attractors.orbits", "OrbitFinder.newton"), ("attractors.orbits", "OrbitFinder.verify"),
+          ("attractors.orbits", "OrbitFinder.multipliers"), ("attractors.settle", "_find_orbits"),
+          ("attractors.settle", "_label_quiet"), ("attractors.settle", "_label_orbits"),
+          ("attractors.settle", "_extend"), ("attractors.settle", "measure"))
 #: Pieces that call other pieces: their own time is theirs less their callees'.
 CALLEES = {"_find_orbits": ("newton", "verify", "multipliers")}
 

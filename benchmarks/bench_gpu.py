@@ -1,5 +1,5 @@
 """The compiled kernel on an NVIDIA GPU beside the same kernel on every CPU core of that machine
-(issue 32), in one run, with nothing but numpy, scipy, numba and numba-cuda:
+in one run, with nothing but numpy, scipy, numba and numba-cuda:
 
     PYTHONPATH=src python3 benchmarks/bench_gpu.py [--sizes 10000,100000,1000000] [--periods 10]
 
@@ -16,7 +16,7 @@ Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper,
    ``with_transfers`` as a study gets it (``Ensemble.advance``: the states copied in and the
    sections copied out every call), and ``resident`` (the launch alone on arrays already on the
    GPU, timed to the device's synchronisation), for the GPU's flat loop and, beside it, the nested
-   loops the CPU runs (``flat_over_nested``, see ``kernel_flow.py``); the CPU's kernel on every core at the sizes up to
+   loops the CPU runs (``flat_over_nested``, see ``kernel/flat.py``); the CPU's kernel on every core at the sizes up to
    100,000 beside it (``gpu_over_cpu``). Target: 100 million start-periods a second at a million
    starts on an H100.
 3. **Agreement**: 10,000 starts marched 20 periods on both. A chaotic transient parts two
@@ -28,7 +28,7 @@ Random starts at 1.2 sqrt(K/M), those of ``bench_batch.py`` (the nominal damper,
 
 4. With ``--registers 0,128,96,64``: the flat march compiled for each cap of registers a thread
    (0: the compiler's choice) at the largest size, with the same bits or not
-   (``kernel.GPU_REGISTERS`` is the one measured best).
+   (``kernel.gpu.REGISTERS`` is the one measured best).
 
 5. With ``--orderings 1,20,100``: at the largest size, the launch alone from the starts marched
    that many periods, the trajectories in their own order and sorted by their last period (onsets,
@@ -65,7 +65,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "src"))
 from piezo_fmu import Parameters  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, device_error  # noqa: E402
 from piezo_fmu.solver.batch import kernel  # noqa: E402
-from piezo_fmu.solver.batch.phases import BatchModel  # noqa: E402
+from piezo_fmu.solver.batch.model import BatchModel  # noqa: E402
 
 W_N = math.sqrt(1000.0)
 RATIO, Y = 1.2, 1e-3
@@ -76,7 +76,7 @@ REPEATS = 3
 #: A start whose twin, nudged by a bit every period, stays this close (m) is one no chaotic transient
 #: parts.
 QUIET = 1e-10
-#: The target of issue 32 on an H100, start-periods a second at a million starts.
+#: The target on an H100, start-periods a second at a million starts.
 TARGET = 100e6
 
 
@@ -120,17 +120,16 @@ def with_transfers(device: str, states: np.ndarray, drive, periods: int) -> dict
             "cpu_s": float(np.median(cpu))}
 
 
-def resident(states: np.ndarray, drive, periods: int, name: str = "march_flat", namespace: dict | None = None,
-             keep: bool = False):
-    """Start-periods a second of the GPU launch ``name`` alone (``march_flat``, the GPU's, or
-    ``march``, the nested loops) from ``namespace`` (the kernel's GPU target when None): the arrays
+def resident(states: np.ndarray, drive, periods: int, nested: bool = False, target=None, keep: bool = False):
+    """Start-periods a second of the GPU launch alone (the flat loop, the GPU's, or with ``nested``
+    the nested loops) compiled by ``target`` (the kernel's GPU target when None): the arrays
     on the GPU before the clock starts, the launch timed to the device's synchronisation, after one
     untimed launch that compiles it. With ``keep``, also the sections of the last march."""
-    return resident_state(whole_state(states), np.zeros(len(states), bool), drive, periods, name, namespace, keep)
+    return resident_state(whole_state(states), np.zeros(len(states), bool), drive, periods, nested, target, keep)
 
 
-def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, name: str = "march_flat",
-                   namespace: dict | None = None, keep: bool = False):
+def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, nested: bool = False, target=None,
+                   keep: bool = False):
     """:func:`resident` from a whole state ((7, n): ``p, p', q, q'``, side, voltages) and its
     ``failed`` flags."""
     from numba import cuda
@@ -140,8 +139,10 @@ def resident_state(state: np.ndarray, failed: np.ndarray, drive, periods: int, n
     host = (True, np.ascontiguousarray(state), failed.copy(), np.zeros(n, np.int64)) + tables.arguments() + (
         np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
         np.empty((periods, n)), np.empty((periods, n)))
-    compiled = (namespace or kernel.target("gpu"))[name]
-    launch = compiled[(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS, kernel.GPU_THREADS]
+    from piezo_fmu.solver.batch.kernel import gpu
+
+    compiled = (target or kernel.target("gpu"))(gpu.march if nested else gpu.march_flat)
+    launch = compiled[(n + gpu.THREADS - 1) // gpu.THREADS, gpu.THREADS]
     times = []
     for k in range(REPEATS + 1):
         args = [cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in host]  # the same start each time
@@ -208,8 +209,9 @@ def long_march(states: np.ndarray, drive, total: int, block: int, sort: bool) ->
     outputs = [cuda.device_array(shape, dtype) for shape, dtype in (((block, n, 4), float), ((block, n), float),
                                                                      ((block, n), np.int64), ((block, n), float),
                                                                      ((block, n), float))]
-    launch = kernel.target("gpu")["march_flat"][(n + kernel.GPU_THREADS - 1) // kernel.GPU_THREADS,
-                                                kernel.GPU_THREADS]
+    from piezo_fmu.solver.batch.kernel import gpu
+
+    launch = kernel.target("gpu")(gpu.march_flat)[(n + gpu.THREADS - 1) // gpu.THREADS, gpu.THREADS]
     rates, times, sorting = [], [], 0.0
     for launches_left in range(total // block - 1, -1, -1):
         cuda.synchronize()
@@ -277,9 +279,11 @@ def register_caps(states: np.ndarray, drive, periods: int, caps: list) -> list:
     rows, first = [], None
     for cap in caps:
         begin = time.perf_counter()
-        namespace = kernel._gpu(cap or None)
-        row, sections = resident(states, drive, periods, namespace=namespace, keep=True)
-        compiled = namespace["march_flat"]
+        from piezo_fmu.solver.batch.kernel import gpu
+
+        target = gpu.build(cap or None)
+        row, sections = resident(states, drive, periods, target=target, keep=True)
+        compiled = target(gpu.march_flat)
         row = {"registers_cap": cap or None, "with_compile_s": time.perf_counter() - begin, **row}
         for key, method in (("registers", "get_regs_per_thread"), ("local_bytes", "get_local_mem_per_thread")):
             if hasattr(compiled, method):  # not on numba's simulator
@@ -381,7 +385,7 @@ def main() -> int:
     for n in sizes:
         row = {"starts": n, "gpu_with_transfers": with_transfers("gpu", states[:n], drive, args.periods),
                "gpu_resident": resident(states[:n], drive, args.periods),
-               "gpu_resident_nested": resident(states[:n], drive, args.periods, "march")}
+               "gpu_resident_nested": resident(states[:n], drive, args.periods, nested=True)}
         row["flat_over_nested"] = (row["gpu_resident"]["start_periods_per_s"]
                                    / row["gpu_resident_nested"]["start_periods_per_s"])
         if n <= args.cpu_up_to:

@@ -1,10 +1,10 @@
-"""What the compiled kernel's event searches cost (issue 32): the kernel against itself with every
+"""What the compiled kernel's event searches cost: the kernel against itself with every
 evaluation its searches make done twice, side by side in one run.
 
     python benchmarks/bench_searches.py [--ratios R,R,...] [--starts N] [--transient P] [--periods P] [--rounds K]
                                         [--points DIAGRAM/points.json] [--cache DIR]
 
-A search for a contact onset or a separation steps towards the event (``kernel_phases.locate``):
+A search for a contact onset or a separation steps towards the event (``kernel.location.locate``):
 at each step it evaluates the event functions, free flight's closed form (an ``exp`` and a
 ``sincos``) or the contact's modes (an ``exp`` and a ``sincos`` a mode), and computes the next step
 (``safe_step``: a square root and a few operations for each function). Four versions of the kernel
@@ -54,40 +54,51 @@ VERSIONS = ("kernel", "contact", "free", "steps")
 RATIOS = (0.553, 0.877, 1.0, 1.48, 1.9)
 
 
+#: The kernel's own functions, which a doubled version calls twice, and numpy's minimum (set by
+#: :func:`patch`).
+contact_value_once = free_values_once = safe_step_once = fmin = None
+
+
 def contact_twice(s, c, work, t):
     """``contact_value`` evaluated twice, the second time at the same instant after the first."""
-    g, dg = contact_value_once(s, c, work, t)  # noqa: F821 (a global of the compiled namespace)
-    return contact_value_once(s, c, work, t + 0.0 * (g + dg))  # noqa: F821
+    g, dg = contact_value_once(s, c, work, t)
+    return contact_value_once(s, c, work, t + 0.0 * (g + dg))
 
 
-def free_twice(c, work, u, du, w, dw, t):
+def free_twice(c, work, phase, t):
     """``free_values`` evaluated twice, the second time at the same instant after the first."""
-    g_a, g_b, dg_a, dg_b, tol = free_values_once(c, work, u, du, w, dw, t)  # noqa: F821
-    return free_values_once(c, work, u, du, w, dw, t + 0.0 * (g_a + g_b + dg_a + dg_b + tol))  # noqa: F821
+    g_a, g_b, dg_a, dg_b, tol = free_values_once(c, work, phase, t)
+    return free_values_once(c, work, phase, t + 0.0 * (g_a + g_b + dg_a + dg_b + tol))
 
 
 def steps_twice(g, dg, bound):
     """``safe_step`` computed twice, the second time after the first (through ``dg``, whose zero's
     sign the step does not read)."""
-    step = safe_step_once(g, dg, bound)  # noqa: F821
-    return safe_step_once(g, dg + 0.0 * fmin(abs(step), 1.0), bound)  # noqa: F821
+    step = safe_step_once(g, dg, bound)
+    return safe_step_once(g, dg + 0.0 * fmin(abs(step), 1.0), bound)
+
+
+#: The names, in the kernel's searches (:mod:`piezo_fmu.solver.batch.kernel.location`), of the
+#: pieces a version doubles.
+SEARCHES = ("contact_value", "free_values", "safe_step")
 
 
 def patch(version: str) -> None:
-    """Make the kernel this process compiles the ``version`` (before its first compilation)."""
-    from piezo_fmu.solver.batch import kernel
-    from piezo_fmu.solver.batch import kernel_phases as phases
+    """Make the kernel this process compiles the ``version`` (before its first compilation): the
+    searches call the doubled piece, registered as the kernel's own is (compiled into its callers
+    when it is)."""
+    from piezo_fmu.solver.batch.kernel import location, registry
 
+    global fmin
+    fmin = location.fmin
     if version == "kernel":
         return
     name, twice = {"contact": ("contact_value", contact_twice), "free": ("free_values", free_twice),
                    "steps": ("safe_step", steps_twice)}[version]
-    setattr(phases, name + "_once", getattr(phases, name))
-    setattr(phases, name, twice)
-    position = kernel.FUNCTIONS.index(name)
-    kernel.FUNCTIONS = kernel.FUNCTIONS[:position] + (name + "_once",) + kernel.FUNCTIONS[position:]
-    if name in kernel.INLINE:  # compiled into its callers, as the kernel's own
-        kernel.INLINE = kernel.INLINE + (name + "_once",)
+    own = getattr(location, name)
+    globals()[name + "_once"] = own
+    registry.source(twice, inline=registry._KINDS[own] == "inline")
+    setattr(location, name, twice)
 
 
 def workload(ratio: float, count: int, points: str | None) -> tuple:
@@ -116,11 +127,11 @@ def workload(ratio: float, count: int, points: str | None) -> tuple:
 def child(version: str, ratios: list, count: int, transient: int, periods: int, points: str | None) -> dict:
     """Marches of the ``version`` at each ratio, in this process (see the module's text)."""
     patch(version)
-    from piezo_fmu.solver.batch import Ensemble, kernel
+    from piezo_fmu.solver.batch import Ensemble
 
-    compiled = kernel.target("cpu")
-    out = {"searches": [compiled[name].py_func.__code__.co_name for name in ("contact_value", "free_values",
-                                                                             "safe_step")]}
+    from piezo_fmu.solver.batch.kernel import location
+
+    out = {"searches": [getattr(location, name).__name__ for name in SEARCHES]}
     for ratio in ratios:
         params, drive, starts, sides = workload(ratio, count, points)
         ens = Ensemble(params, drive, starts, sides=sides)

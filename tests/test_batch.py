@@ -1,14 +1,12 @@
-"""The batch engine (issue 27): many trajectories at once, the same motion as the scalar core and the
-FMU.
+"""The batch engine: many trajectories at once, the same motion as the scalar core and the FMU.
 
 It is checked against the scalar core (``Simulator``, driven with the same hold) and against the FMU
 (through the harness's drive) on stable orbits of the nominal damper (two impacts a period at 1.2
 ``sqrt(K/M)``, three at 0.8), of the coupled circuit model and of a stiff contact: the section
 states agree to 1e-9 m after 100 periods and the contact onsets period by period; and against the
 core over one period on 150 dampers drawn over the whole range the core's property tests take.
-One trajectory gives the same bits alone and inside a batch of 10,000, and the
-engine gives the same bits on the array API's strict reference library as on numpy (the GPU path's
-code is the same). Grazing contacts, the linear limit and bad input have tests of their own.
+One trajectory gives the same bits alone and inside a batch of 10,000. Grazing contacts, the linear
+limit and bad input have tests of their own.
 """
 
 from __future__ import annotations
@@ -19,10 +17,9 @@ import numpy as np
 import pytest
 
 from piezo_fmu import Parameters, Simulator
-from piezo_fmu.solver.batch import Ensemble, HarmonicHold, namespace
-from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble
-from piezo_fmu.solver.batch.orbits import OrbitFinder, free_for_ever, linear_orbit, scale_of
-from piezo_fmu.solver.batch.phases import BatchModel
+from piezo_fmu.solver.batch import Ensemble, HarmonicHold
+from piezo_fmu.solver.batch.attractors.orbits import OrbitFinder, free_for_ever, linear_orbit, scale_of
+from piezo_fmu.solver.batch.model import BatchModel
 from piezo_fmu_harness.periodic.band import linear_transmissibility
 from piezo_fmu_harness.periodic.drive import HarmonicDrive
 
@@ -104,20 +101,6 @@ def test_one_trajectory_alone_gives_the_bits_it_gives_in_a_batch_of_ten_thousand
         alone = Ensemble(NOMINAL, drive, starts[j:j + 1]).advance(3, observe=True)
         for name in alone:
             assert np.array_equal(alone[name][:, 0], batch[name][:, j]), (j, name)
-
-
-@pytest.mark.parametrize("voltage_model", [1, 2])
-def test_the_engine_needs_nothing_beyond_the_array_api_standard(voltage_model):
-    """Run on array-api-strict, which refuses whatever the standard does not define, the array engine
-    (the kernel's oracle) gives numpy's bits: the code CuPy runs is the code the CPU tests cover."""
-    params = Parameters(voltage_model=voltage_model, R_load=3.59e6)
-    drive = HarmonicHold(1.2 * W_N, 1e-3)
-    starts = [(-4.545e-3, -0.0739, -4.545e-3, 0.0), (2e-3, 0.0, 2e-3, 0.0), (0.0, 0.1, 3e-3, 0.0)]
-    numpy_run = ArrayEnsemble(params, drive, starts).advance(8, observe=True)
-    strict_run = ArrayEnsemble(params, drive, starts, device="array-api-strict").advance(8, observe=True)
-    assert numpy_run["impacts"].sum() > 0
-    for name in numpy_run:
-        assert np.array_equal(numpy_run[name], strict_run[name]), name
 
 
 @pytest.mark.parametrize("depth", [1e-9, -1e-9, 1e-12, -1e-12])
@@ -258,7 +241,7 @@ def test_the_engine_follows_the_core_over_the_whole_range_of_dampers():
     assert len(kinds) == 18 + 2 and chatter > 0 and onsets_seen > 1000
 
 
-def test_a_contact_resting_on_its_barrier_through_long_hold_steps_follows_the_core():
+def test_a_contact_resting_on_its_barrier_through_long_hold_steps_follows_the_core(monkeypatch):
     """A light impact mass (1.4 g) on a stiff, damped barrier under a slow drive (hold steps of 62 ms):
     it lands slowly and rests on the barrier, its separation function within a few 1e-11 m of zero,
     and each search must prove in thousands of safe steps that it stays there (the source with the
@@ -274,14 +257,14 @@ def test_a_contact_resting_on_its_barrier_through_long_hold_steps_follows_the_co
     assert np.abs(record["sections"][0, 0] - sections[0]).max() < 1e-9
     # the same march by the source run as Python, with the search capped at 200 steps: set aside
     from piezo_fmu.solver.batch import kernel
+    from piezo_fmu.solver.batch.kernel import layout, location, periods
 
-    plain = kernel._compiled(lambda f: f, {})
-    plain["MAX_ITERATIONS"] = 200
+    monkeypatch.setattr(location, "MAX_ITERATIONS", 200)
     state, failed = np.zeros((7, 1)), np.zeros(1, bool)
     state[:4, 0] = start
     out = (np.empty((1, 1, 4)), np.empty((1, 1)), np.empty((1, 1), np.int64), np.empty((1, 1)), np.empty((1, 1)))
     tables = kernel.Tables(BatchModel.of(params), [drive])
-    plain["march_one"](False, 0, state, failed, np.zeros(1, np.int64), *tables.arguments(), *out, np.empty(plain["WORK"]))
+    periods.march_one(False, 0, state, failed, np.zeros(1, np.int64), *tables.arguments(), *out, np.empty(layout.WORK))
     assert failed[0] and np.isnan(out[0]).all()
 
 
@@ -322,7 +305,7 @@ def test_bad_input_is_refused_with_the_parameter_and_its_range():
     with pytest.raises(ValueError, match=r"samples = 8 .*allowed range \[16, inf\)"):
         HarmonicHold(1.0, 1e-3, samples=8)
     with pytest.raises(ValueError, match=r"device = 'tpu' is not known; allowed values \('cpu', 'gpu'\)"):
-        namespace("tpu")
+        Ensemble(NOMINAL, drive, [(0.0, 0.0, 0.0, 0.0)], device="tpu")
     with pytest.raises(ValueError, match=r"periods = 0 is out of range; allowed range \[1, inf\)"):
         Ensemble(NOMINAL, drive, [(0.0, 0.0, 0.0, 0.0)]).advance(0)
 
@@ -334,7 +317,7 @@ def test_a_contact_whose_modes_coincide_is_refused_and_one_whose_modes_keep_thei
     either sign: taken as 0), and with ``C = 0`` only the slow mode does (``C_eq`` damps it by a
     part in 1e16 or so): both taken, no mode growing."""
     from fmu_host import DEFECTIVE_C_EQ
-    from piezo_fmu.solver.batch.phases import ROUNDING
+    from piezo_fmu.solver.batch.model import ROUNDING
 
     with pytest.raises(ValueError, match=r"C_eq = 242.31259554649523 N.s/m.*defective.*condition below 1e\+08"):
         BatchModel.of(NOMINAL.replace(m=0.3, C_eq=DEFECTIVE_C_EQ))
@@ -344,16 +327,6 @@ def test_a_contact_whose_modes_coincide_is_refused_and_one_whose_modes_keep_thei
     slow = BatchModel.of(NOMINAL.replace(C=0.0)).contact.lam
     assert np.all(slow.real <= 0.0) and np.abs(slow.real).max() > 1.0  # the contact's own mode decays
     assert BatchModel.of(NOMINAL).contact.lam.real.max() < 0.0  # a damped damper's modes as before
-
-
-def test_the_gpu_device_without_cupy_says_what_is_missing():
-    try:
-        import cupy  # noqa: F401
-    except ImportError:
-        with pytest.raises(ValueError, match="device = 'gpu': CuPy with a CUDA GPU is needed"):
-            namespace("gpu")
-    else:  # a machine with CuPy: the namespace is CuPy's
-        assert "cupy" in namespace("gpu").__name__
 
 
 def test_scale_is_metres():

@@ -1,10 +1,11 @@
-"""The compiled kernel (issue 32): the source it is compiled from, run as Python, gives its bits; it
-marches the motion of the array engine (its oracle, the same physics written with array operations);
-the GPU's code is the same source, run here on numba's CUDA simulator; the Lyapunov measure marches
-the pair the array engine marched. Where its compiled code is kept: ``test_kernel_cache.py``.
+"""The compiled kernel: the source it is compiled from, run as Python, gives its bits; the GPU's
+flat loop gives the CPU's nested loops' bits; the Lyapunov measure marches the pair that the
+kernel's own period-by-period march gives; its switch rules are the model's; the GPU's code is the
+same source, run here on numba's CUDA simulator. Where its compiled code is kept:
+``test_kernel_cache.py``.
 
-The agreement with the scalar core and with the FMU, one trajectory alone against a batch of
-10,000, and grazing contacts are in ``test_batch.py``, which runs on the kernel.
+The agreement with the scalar core and with the FMU (the independent checks of its physics), one
+trajectory alone against a batch of 10,000, and grazing contacts are in ``test_batch.py``.
 """
 
 from __future__ import annotations
@@ -20,10 +21,11 @@ import numpy as np
 import pytest
 
 from piezo_fmu import Parameters
-from piezo_fmu.solver.batch import Ensemble, HarmonicHold, device_error, kernel
-from piezo_fmu.solver.batch.array_ensemble import ArrayEnsemble
-from piezo_fmu.solver.batch.orbits import OrbitFinder, scale_of
-from piezo_fmu.solver.batch.phases import BatchModel
+from piezo_fmu.model import dynamics
+from piezo_fmu.solver.batch import Ensemble, HarmonicHold, device_error
+from piezo_fmu.solver.batch import kernel
+from piezo_fmu.solver.batch.kernel import flat, layout, location, periods, rounds, switches
+from piezo_fmu.solver.batch.model import BatchModel
 
 ROOT = Path(__file__).resolve().parents[1]
 W_N = math.sqrt(1000.0)
@@ -48,6 +50,20 @@ def scaled_gap(a, b, omega):
     return np.nanmax(np.abs((a - b) * np.array([1.0, 1.0 / omega, 1.0, 1.0 / omega])))
 
 
+def march_as_python(march_one, tables, starts, periods_, failed=None):
+    """The outputs, final states and failures of ``march_one`` (the source, uncompiled) over every
+    start."""
+    n = len(starts)
+    state = np.zeros((7, n))
+    state[:4] = starts.T
+    failed = np.zeros(n, bool) if failed is None else failed.copy()
+    out = (np.empty((periods_, n, 4)), np.empty((periods_, n)), np.empty((periods_, n), np.int64),
+           np.empty((periods_, n)), np.empty((periods_, n)))
+    for i in range(n):
+        march_one(True, i, state, failed, np.zeros(n, np.int64), *tables.arguments(), *out, np.empty(layout.WORK))
+    return out, state, failed
+
+
 @pytest.mark.parametrize("case", DAMPERS)
 def test_the_source_run_as_python_gives_the_compiled_kernels_bits(case):
     """The scalar functions, uncompiled, march as the compiled kernel does, bit for bit: the
@@ -57,44 +73,36 @@ def test_the_source_run_as_python_gives_the_compiled_kernels_bits(case):
     starts = random_starts(params, 6)
     compiled = Ensemble(params, drive, starts).advance(2, observe=True)
     tables = kernel.Tables(BatchModel.of(params), [drive])
-    plain = kernel._compiled(lambda f: f, {})
-    n, periods = len(starts), 2
-    state = np.zeros((7, n))
-    state[:4] = starts.T
-    out = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
-           np.empty((periods, n)), np.empty((periods, n)))
-    for i in range(n):
-        plain["march_one"](True, i, state, np.zeros(n, bool), np.zeros(n, np.int64), *tables.arguments(), *out,
-                           np.empty(plain["WORK"]))
+    out, _, _ = march_as_python(periods.march_one, tables, starts, 2)
     assert compiled["impacts"].sum() > 0
     for name, values in zip(("sections", "sides", "impacts", "top", "bottom"), out):
         assert np.array_equal(compiled[name], values), name
 
 
-def march_both(run, n, periods, failed):
+def march_both(run, n, periods_, failed):
     """The outputs, final states and failures of ``run(flat, state, failed, outputs)`` for the
     nested march and the flat one, from the same ``(7, n)`` states."""
     results = []
-    for flat in (False, True):
-        out = (np.empty((periods, n, 4)), np.empty((periods, n)), np.empty((periods, n), np.int64),
-               np.empty((periods, n)), np.empty((periods, n)))
+    for is_flat in (False, True):
+        out = (np.empty((periods_, n, 4)), np.empty((periods_, n)), np.empty((periods_, n), np.int64),
+               np.empty((periods_, n)), np.empty((periods_, n)))
         bad = failed.copy()
-        state = run(flat, bad, out)
+        state = run(is_flat, bad, out)
         results.append((out, state, bad))
     return results
 
 
-def assert_same_bits(nested, flat):
-    for a, b in zip(nested[0] + (nested[1], nested[2]), flat[0] + (flat[1], flat[2])):
+def assert_same_bits(nested, flat_):
+    for a, b in zip(nested[0] + (nested[1], nested[2]), flat_[0] + (flat_[1], flat_[2])):
         assert np.array_equal(a, b, equal_nan=True)
 
 
 @pytest.mark.parametrize("case", DAMPERS)
 @pytest.mark.parametrize("ratio", [0.8, 1.25])
 def test_the_gpus_flat_march_gives_the_nested_marchs_bits(case, ratio):
-    """The flat loop the GPU runs (``kernel_flow``) and the nested loops the CPU runs, both
-    compiled for the CPU: every output, the final states and the failures bit for bit, from random
-    starts (most impacting; some failed before the march) and starts at a barrier."""
+    """The flat loop the GPU runs (:mod:`~piezo_fmu.solver.batch.kernel.flat`) and the nested loops
+    the CPU runs, both compiled for the CPU: every output, the final states and the failures bit for
+    bit, from random starts (most impacting; some failed before the march) and starts at a barrier."""
     params = DAMPERS[case]
     drive = HarmonicHold(ratio * W_N, 1e-3)
     tables = kernel.Tables(BatchModel.of(params), [drive])
@@ -109,95 +117,58 @@ def test_the_gpus_flat_march_gives_the_nested_marchs_bits(case, ratio):
     failed = np.zeros(len(starts), bool)
     failed[::300] = True
 
-    def run(flat, bad, out):
+    def run(is_flat, bad, out):
         state = np.zeros((7, len(starts)))
         state[:4] = starts.T
-        got = kernel.march("cpu", tables, state, bad, np.zeros(len(starts), np.int64), 6, True, flat=flat)
+        got = kernel.march("cpu", tables, state, bad, np.zeros(len(starts), np.int64), 6, True, flat=is_flat)
         for k, name in enumerate(("sections", "sides", "impacts", "top", "bottom")):
             out[k][...] = got[name]
         return state
 
-    nested, flat = march_both(run, len(starts), 6, failed)
+    nested, flat_ = march_both(run, len(starts), 6, failed)
     assert nested[0][2].sum() > 3 * len(starts)
-    assert_same_bits(nested, flat)
+    assert_same_bits(nested, flat_)
 
 
 @pytest.mark.parametrize("cap", [{"MAX_ITERATIONS": 5}, {"MAX_ROUNDS": 1}])
-def test_the_flat_march_fails_where_the_nested_one_does(cap):
+def test_the_flat_march_fails_where_the_nested_one_does(cap, monkeypatch):
     """With the event search or the rounds of a step capped low (the source run as Python), every
     start fails in its first period, after at least one onset: both loops fail at the same instant
     and leave the same NaNs, voltages and onset counts."""
+    for name, value in cap.items():
+        for module in (location, rounds, flat):
+            if hasattr(module, name):
+                monkeypatch.setattr(module, name, value)
     params = DAMPERS["coupled circuit"]
     drive = HarmonicHold(1.25 * W_N, 1e-3)
     tables = kernel.Tables(BatchModel.of(params), [drive])
-    plain = kernel._compiled(lambda f: f, {})
-    plain.update(cap)
     starts = random_starts(params, 8, seed=5)
-    n, periods = len(starts), 2
-
-    def run(flat, bad, out):
-        state = np.zeros((7, n))
-        state[:4] = starts.T
-        march = plain["march_one_flat" if flat else "march_one"]
-        for i in range(n):
-            march(True, i, state, bad, np.zeros(n, np.int64), *tables.arguments(), *out, np.empty(plain["WORK"]))
-        return state
-
-    nested, flat = march_both(run, n, periods, np.zeros(n, bool))
+    nested, flat_ = (march_as_python(march_one, tables, starts, 2) for march_one in (periods.march_one,
+                                                                                     flat.march_one_flat))
     (sections, _, impacts, _, _), _, failed = nested
     assert failed.all() and np.isnan(sections).all()
     assert (impacts[0] >= 1).all() and (impacts[1] == 0).all()
-    assert_same_bits(nested, flat)
+    assert_same_bits(nested, flat_)
 
 
-@pytest.mark.parametrize("case", DAMPERS)
-def test_the_kernel_marches_the_array_engines_motion(case):
-    """From random starts (most impacting), one period on the kernel and on the array engine: the
-    same contact onsets and phases, the sections within rounding (the two differ only in the last
-    bits of cos, exp and the modal sums)."""
-    params = DAMPERS[case]
-    drive = HarmonicHold(1.25 * W_N, 1e-3)
-    starts = random_starts(params, 300, seed=1)
-    fast = Ensemble(params, drive, starts).advance(1, observe=True)
-    oracle = ArrayEnsemble(params, drive, starts).advance(1, observe=True)
-    assert (fast["impacts"] > 0).mean() > 0.5
-    assert np.array_equal(fast["impacts"], oracle["impacts"])
-    assert np.array_equal(fast["sides"], oracle["sides"])
-    assert scaled_gap(fast["sections"], oracle["sections"], drive.omega) < 1e-12
-    for name in ("top", "bottom"):
-        assert np.max(np.abs(fast[name] - oracle[name])) < 1e-12, name
-
-
-@pytest.mark.parametrize("case", DAMPERS)
-def test_on_a_stable_orbit_the_kernel_and_the_array_engine_agree_for_a_hundred_periods(case):
-    params = DAMPERS[case]
-    drive = HarmonicHold(1.2 * W_N, 1e-3)
-    finder = OrbitFinder(BatchModel.of(params), [drive], 1e-9 * drive.amplitude)
-    start = finder.march([[2e-3, 0.0, 2e-3, 0.0]], [0.0], [0], 200)["sections"][-1]
-    fast = Ensemble(params, drive, start).advance(100)
-    oracle = ArrayEnsemble(params, drive, start).advance(100)
-    assert fast["impacts"].min() >= 1
-    assert np.array_equal(fast["impacts"], oracle["impacts"])
-    assert scaled_gap(fast["sections"], oracle["sections"], drive.omega) < 1e-12
-
-
-def test_the_lyapunov_measure_marches_the_pair_the_array_engine_marched():
-    """``Ensemble.separate`` against the pair marched period by period on the array engine, the
-    companion put back along the separation after every period (the measure as it was written
-    before the kernel): the same log stretches."""
+def test_the_lyapunov_measure_marches_the_pair_the_kernel_marches_period_by_period():
+    """``Ensemble.separate`` (the pair in one pass of the kernel, :func:`.periods.separate_one`)
+    against the trajectory and its companion marched as two ordinary trajectories of an ensemble,
+    one period at a time, the companion put back along the separation after every period by
+    numpy: the same log stretches to rounding, the same trajectory bit for bit."""
     params = DAMPERS["nominal"]
     drive = HarmonicHold(1.25 * W_N, 1e-3)
     starts = random_starts(params, 5, seed=2)
-    scale = np.tile(scale_of(drive), (5, 1))
+    scale = np.tile([1.0, 1.0 / drive.omega, 1.0, 1.0 / drive.omega], (5, 1))
     delta = 1e-8 * np.abs(starts * scale).max(axis=1)
     direction = np.array([0.5, -0.5, 0.5, 0.5])
     offset = direction[None] * delta[:, None] / scale
-    periods = 6
-    fast = Ensemble(params, drive, starts).separate(offset, scale, delta, periods)
-    pair = ArrayEnsemble(params, drive, np.concatenate([starts, starts]))
+    count = 6
+    fast = Ensemble(params, drive, starts).separate(offset, scale, delta, count)
+    pair = Ensemble(params, drive, np.concatenate([starts, starts]))
     companions = np.arange(10) >= 5
     logs = []
-    for _ in range(periods):
+    for _ in range(count):
         states, sides = pair.states[:5], pair.sides[:5]
         pair.assign(companions, states + offset, sides)
         pair.advance(1)
@@ -205,8 +176,57 @@ def test_the_lyapunov_measure_marches_the_pair_the_array_engine_marched():
         gap = np.linalg.norm((now[5:] - now[:5]) * scale, axis=1)
         logs.append(np.log(gap / delta))
         offset = (now[5:] - now[:5]) * (delta / gap)[:, None]
-    assert np.max(np.abs(fast["logs"] - np.array(logs))) < 1e-5
-    assert np.max(np.abs(fast["samples"][-1] - pair.states[:5, 0])) < 1e-12
+    assert np.isfinite(fast["logs"]).all() and fast["impacts"].sum() > 0
+    # the same arithmetic but for the norm's sums (numpy's may add in another order): 0.0 here
+    assert np.max(np.abs(fast["logs"] - np.array(logs))) < 1e-12
+    assert np.array_equal(fast["samples"][-1], pair.states[:5, 0])
+
+
+def thresholds(rng, count) -> list:
+    """Random values, and values on both sides of zero down to the smallest doubles, and zero."""
+    scale = 10.0 ** rng.uniform(-12, 4, count)
+    tiny = rng.choice([-1, 1], 40) * 10.0 ** rng.uniform(-320, -300, 40)
+    return (rng.standard_normal(count) * scale).tolist() + [0.0, -0.0, 5e-324, -5e-324, 2.2e-308] + tiny.tolist()
+
+
+def test_the_kernels_switch_rules_are_the_models_on_both_sides_of_every_threshold():
+    """:mod:`.kernel.switches` against :mod:`piezo_fmu.model.dynamics`, on random masses and
+    velocities and on states straddling the threshold of ``approach_sign`` (the main spring and
+    damper pushing neither way: ``K u + C u'`` near 0, either side, and exactly 0): the same
+    velocities after a capture and a release, bit for bit, and the same side."""
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        m, M_eq, M1 = (10.0 ** rng.uniform(-4, 2, 3)).tolist()
+        M = M1 + M_eq
+        dp, dq = (rng.standard_normal(2) * 10.0 ** rng.uniform(-9, 1, 2)).tolist()
+        dq = dp if rng.uniform() < 0.05 else dq  # no relative velocity
+        assert switches.capture(m, M_eq, dp, dq) == dynamics.capture(m, M_eq, dp, dq)[0]
+        assert switches.release(M, M1, M_eq, dp, dq) == dynamics.release(M, M1, M_eq, dp, dq)[0]
+    K, C = 1000.0, 0.1
+    for u in thresholds(rng, 300):
+        # u' chosen so that K u + C u' falls either side of 0, by a few ulp, or on it
+        for du in (-K * u / C, math.nextafter(-K * u / C, math.inf), math.nextafter(-K * u / C, -math.inf),
+                   float(rng.standard_normal())):
+            for side in (1, -1):
+                assert switches.approach_sign(K, C, u, du, float(side)) == dynamics.approach_sign(K, C, u, du, side)
+    assert switches.approach_sign(K, C, math.nan, 0.0, 1.0) == dynamics.approach_sign(K, C, math.nan, 0.0, 1) == 0
+
+
+def test_every_function_the_kernel_compiles_is_registered_where_it_is_defined():
+    """The kernel's wiring is explicit: each function a registered function calls is itself
+    registered (compiled for the target), found by what its code names, and no function is
+    registered twice under one name in a module."""
+    from piezo_fmu.solver.batch.attractors import books
+    from piezo_fmu.solver.batch.kernel import cpu, flows, registry, scalars
+
+    modules = (books, cpu, flat, flows, location, periods, rounds, scalars, switches)
+    registered = {f for f in registry._KINDS if f.__module__ in {m.__name__ for m in modules}}
+    assert len(registered) >= 30
+    for function in registered:
+        for name in function.__code__.co_names:
+            value = function.__globals__.get(name)
+            if callable(value) and getattr(value, "__module__", "").startswith("piezo_fmu.solver.batch"):
+                assert value in registry._KINDS, f"{function.__qualname__} calls {name}, which is not registered"
 
 
 def on_the_simulator(script: Path, starts: np.ndarray) -> list[str]:
@@ -263,9 +283,9 @@ def test_a_study_on_the_gpu_marches_its_starts_there_and_newtons_small_ensembles
         "from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, kernel, settle\n"
         "launches = []\n"
         "launch = kernel._launch\n"
-        "def spy(device, name, args, n, *rest, **named):\n"
-        "    launches.append([device, name, n])\n"
-        "    return launch(device, name, args, n, *rest, **named)\n"
+        "def spy(device, entry, args, n, *rest, **named):\n"
+        "    launches.append([device, entry.__name__, n])\n"
+        "    return launch(device, entry, args, n, *rest, **named)\n"
         "kernel._launch = spy\n"
         "params = Parameters(voltage_model=1, R_load=3.59e6)\n"
         "drive = HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)\n"

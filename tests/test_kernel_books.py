@@ -1,4 +1,4 @@
-"""settle's compiled bookkeeping (:mod:`piezo_fmu.solver.batch.kernel_books`) gives the answers of
+"""settle's compiled bookkeeping (:mod:`piezo_fmu.solver.batch.attractors.books`) gives the answers of
 the numpy expressions it replaced, bit for bit: on histories with NaN sections (a failed
 trajectory), ties between an orbit's points, returns that shrink and returns that do not."""
 
@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from piezo_fmu.solver.batch import kernel
-from piezo_fmu.solver.batch.settle import SEED_REACH
+from piezo_fmu.solver.batch.attractors import books as source
+from piezo_fmu.solver.batch.attractors.settle import SEED_REACH
+
+
+def compiled(function):
+    """The bookkeeping ``function`` as settle runs it: compiled on the CPU."""
+    return kernel.target("cpu")(function)
 
 
 def numpy_shrinking(sections, scale, open_, most):
@@ -47,10 +53,9 @@ def test_the_compiled_screen_for_newtons_seeds_is_numpys(seed):
     sections, rng = histories(seed)
     scale = rng.uniform(0.5, 2.0, (sections.shape[1], 4))
     open_ = rng.random(sections.shape[1]) < 0.9
-    books = kernel.target("cpu")
     for most in (1, 4, 13):
         expected = numpy_shrinking(sections, scale, open_, most)
-        got = books["shrinking_returns"](sections, scale, open_, most, SEED_REACH)
+        got = compiled(source.shrinking_returns)(sections, scale, open_, most, SEED_REACH)
         assert expected.any() and not expected.all()
         assert np.array_equal(got, expected)
 
@@ -59,14 +64,13 @@ def test_the_compiled_screen_for_newtons_seeds_is_numpys(seed):
 def test_the_compiled_distances_to_an_orbit_are_numpys(seed):
     sections, rng = histories(seed)
     scale = rng.uniform(0.5, 2.0, 4)
-    books = kernel.target("cpu")
     for m in (1, 3, 8):
         points = sections[-1, rng.integers(0, sections.shape[1], m)] * scale
         points[m // 2] = points[0]  # a tie: the first of equal points is the nearest
         if m == 8:
             points[3, 1] = np.nan  # an orbit point's NaN makes every gap NaN from it on
         expected = numpy_distances(sections, scale, points)
-        got = books["orbit_distances"](sections, scale, np.ascontiguousarray(points))
+        got = compiled(source.orbit_distances)(sections, scale, np.ascontiguousarray(points))
         assert np.isnan(expected[0]).any()
         assert np.array_equal(got[0], expected[0], equal_nan=True)
         assert np.array_equal(got[1], expected[1])
@@ -100,8 +104,7 @@ def test_the_compiled_choice_of_newtons_orders_is_numpys(seed):
     broken = rng.random(n) < 0.2
     impacts[rng.integers(0, span, n)[broken], np.flatnonzero(broken)] += 1
     shrinking = rng.random((most, n)) < 0.3
-    books = kernel.target("cpu")
-    orders = books["converging_orders"](shrinking, impacts.astype(np.int64), sides.astype(np.int64))
+    orders = compiled(source.converging_orders)(shrinking, impacts.astype(np.int64), sides.astype(np.int64))
     got = {k: np.flatnonzero(orders == k).tolist() for k in np.unique(orders[orders > 0]).tolist()}
     expected = numpy_first_orders(shrinking, impacts, sides)
     assert len(expected) > 3 and list(got) == list(expected)
@@ -114,8 +117,8 @@ def test_the_compiled_proof_of_free_flight_is_numpys(seed):
     contact, some NaN: the compiled flags are numpy's, False where not asked."""
     from piezo_fmu import Parameters
     from piezo_fmu.solver.batch import HarmonicHold
-    from piezo_fmu.solver.batch.orbits import free_for_ever, linear_orbit
-    from piezo_fmu.solver.batch.phases import BatchModel
+    from piezo_fmu.solver.batch.attractors.orbits import free_for_ever, linear_orbit
+    from piezo_fmu.solver.batch.model import BatchModel
 
     model = BatchModel.of(Parameters())
     orbit = linear_orbit(model, HarmonicHold(1.25 * 1000**0.5, 1e-3))
@@ -131,7 +134,7 @@ def test_the_compiled_proof_of_free_flight_is_numpys(seed):
     asked = rng.random(n) < 0.8
     expected = np.zeros(n, bool)
     expected[asked] = free_for_ever(model, orbit, states[asked], sides[asked])
-    got = kernel.target("cpu")["free_for_ever_flags"](states, sides, asked, float(orbit.nodes[0, 0]),
+    got = compiled(source.free_for_ever_flags)(states, sides, asked, float(orbit.nodes[0, 0]),
                                                       float(orbit.nodes[0, 1]), float(model.free.w2),
                                                       float(orbit.low), float(orbit.high), float(hg))
     assert 50 < expected.sum() < asked.sum() - 50

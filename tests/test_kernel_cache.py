@@ -1,6 +1,6 @@
-"""Where the compiled kernel is kept (:mod:`piezo_fmu.solver.batch.kernel_cache`): a copy of the
-package (an FMU's) finds the code another compiled, each version of the kernel's files has its own
-folder, and a folder that cannot be written costs a compilation, not the study."""
+"""Where the compiled kernel is kept (:mod:`piezo_fmu.solver.batch.kernel.cache`): a copy of the
+package (an FMU's) finds the code another compiled, each version of the batch engine's files has its
+own folder, and a folder that cannot be written costs a compilation, not the study."""
 
 from __future__ import annotations
 
@@ -41,22 +41,23 @@ def test_a_copy_of_the_package_finds_the_compiled_kernel_in_the_cache(tmp_path):
     assert "data saved" not in log, log[-3000:]
 
 
-def test_each_version_of_the_kernels_files_has_its_own_cache_folder(tmp_path):
-    """The compiled code is kept by the content of all three files: a copy elsewhere finds the same
-    folder, a change to any one of them (the drivers' file included) another."""
-    from piezo_fmu.solver.batch import kernel_cache
+def test_each_version_of_the_batch_engines_files_has_its_own_cache_folder(tmp_path):
+    """The compiled code is kept by the content of all the engine's files: a copy elsewhere finds the
+    same folder; a change to any one of them (the entry points' file, or one whose functions the
+    kernel only calls) another."""
+    from piezo_fmu.solver.batch.kernel import cache
 
-    files = [Path(kernel.__file__).with_name(name) for name in ("kernel_phases.py", "kernel_source.py", "kernel.py")]
     copies = []
-    for name in ("a", "b"):
-        (tmp_path / name).mkdir()
-        copies.append([tmp_path / name / f.name for f in files])
-        for f, c in zip(files, copies[-1]):
-            c.write_bytes(f.read_bytes())
-    here = kernel_cache.version_folder(tuple(files), tmp_path)
-    assert kernel_cache.version_folder(tuple(copies[0]), tmp_path) == here
-    copies[1][2].write_text(copies[1][2].read_text() + "\n# another INLINE\n")
-    assert kernel_cache.version_folder(tuple(copies[1]), tmp_path) != here
+    for name in ("a", "b", "c"):
+        copies.append(tmp_path / name / "batch")
+        shutil.copytree(cache.PACKAGE, copies[-1], ignore=shutil.ignore_patterns("__pycache__"))
+    here = cache.version_folder(tmp_path, cache.PACKAGE)
+    assert cache.version_folder(tmp_path, copies[0]) == here
+    cpu = copies[1] / "kernel" / "cpu.py"
+    cpu.write_text(cpu.read_text() + "\n# another compiler option\n")
+    assert cache.version_folder(tmp_path, copies[1]) != here
+    (copies[2] / "kernel" / "switches.py").rename(copies[2] / "kernel" / "rules.py")  # the same bytes, moved
+    assert cache.version_folder(tmp_path, copies[2]) not in (here, cache.version_folder(tmp_path, copies[1]))
     assert here.parent == tmp_path
 
 

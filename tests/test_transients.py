@@ -158,11 +158,11 @@ def test_a_negative_exponent_is_never_chaotic_whatever_the_plateau():
 
 
 def test_the_window_measures_bound_the_exponent_and_tell_a_line_spectrum_from_a_broad_one():
-    """The statistics the verdict reads (``piezo_fmu.solver.batch.trajectories``): per-period log
+    """The statistics the verdict reads (``piezo_fmu.solver.batch.attractors.measures``): per-period log
     stretches of mean 0.3 and of mean -0.02 give exponents whose 95% intervals hold their means and
     exclude 0; section samples on two incommensurate lines have a line share above 0.9, white noise
     one well below it."""
-    from piezo_fmu.solver.batch.trajectories import line_share, statistics
+    from piezo_fmu.solver.batch.attractors.measures import line_share, statistics
 
     rng = np.random.default_rng(4)
     periods = 200

@@ -21,8 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from piezo_fmu import Parameters, Simulator  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold  # noqa: E402
-from piezo_fmu.solver.batch.orbits import OrbitFinder  # noqa: E402
-from piezo_fmu.solver.batch.phases import BatchModel  # noqa: E402
+from piezo_fmu.solver.batch.attractors.orbits import OrbitFinder  # noqa: E402
+from piezo_fmu.solver.batch.model import BatchModel  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path  # noqa: E402
 from piezo_fmu_harness.periodic.drive import HarmonicDrive  # noqa: E402
 

@@ -5,7 +5,7 @@
 Each ``FOLDER`` is the results folder of a ``fractions``, ``basins`` or ``bifurcation`` run (told
 apart by its files). Every start (fractions, basins) or point (bifurcation) whose motion the study
 called chaotic or quasi-periodic is marched again from its start on the batch engine, under the
-same drive, by the same rule (``piezo_fmu.solver.batch.settle``), with a budget ``--factor`` times
+same drive, by the same rule (``piezo_fmu.solver.batch.attractors.settle``), with a budget ``--factor`` times
 the study's. Its verdict **persists** when the longer march still finds it on no orbit; one that
 reaches an orbit (or the motion without impacts) after the study's budget was a transient, and is
 listed with the period it resolved at and what it reached.

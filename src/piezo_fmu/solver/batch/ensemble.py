@@ -1,19 +1,18 @@
 """Many trajectories of one damper marched together, hold step by hold step, exactly, on the
-compiled kernel (:mod:`.kernel`, issue 32).
+compiled kernel (:mod:`.kernel`).
 
 An :class:`Ensemble` holds the state of ``n`` trajectories (``p, p', q, q'``, the phase, and the
 patch voltages under ``voltage_model = 2``), each under its own harmonic base
 (:class:`~.drive.HarmonicHold`, all with the same nodes a period). :meth:`Ensemble.advance` hands a
-whole block of periods to the kernel, which takes each trajectory through its hold steps with no
-Python in the loop: free flight in closed form where no contact is possible in a step, else event
-by event (the switch located rigorously on the closed form of the phase, the momentum-exact switch
-rule applied, docs/model.md section 3) to the step's end. A trajectory's cost does not depend on how
-many march with it, and it gives the same bits alone and in a batch.
+whole block of periods to the kernel, which takes each trajectory through its hold steps: free
+flight in closed form where no contact is possible in a step, else event by event (the switch
+located rigorously on the closed form of the phase, the momentum-exact switch rule applied,
+docs/model.md section 3) to the step's end. A trajectory's cost does not depend on how many march
+with it, and it gives the same bits alone and in a batch.
 
 The base is the FMUs' first-order hold (:mod:`.drive`), so an ensemble marches the motion an FMU
-marched by the harness shows, and agrees with the scalar core (``piezo_fmu.solver.Simulator``) and
-the FMUs to rounding on orbits that are stable. The array engine (:mod:`.array_ensemble`), the same
-physics written with array operations, is the kernel's test oracle.
+marched by the harness shows, and agrees with the scalar core (:class:`piezo_fmu.solver.Simulator`)
+and the FMUs to rounding on orbits that are stable.
 """
 
 from __future__ import annotations
@@ -21,11 +20,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.parameters import Parameters
+from . import kernel
 from .drive import HarmonicHold
-from .phases import BatchModel
-
-#: The devices the kernel runs on: the CPU (numba) and an NVIDIA GPU (numba's CUDA target).
-DEVICES = ("cpu", "gpu")
+from .model import BatchModel
 
 
 def checked(params: Parameters, model: BatchModel, drives, states, group, sides, volts) -> tuple:
@@ -91,10 +88,7 @@ class Ensemble:
 
     def __init__(self, params: Parameters, drives, states, group=None, sides=None, volts=None, device: str = "cpu",
                  model: BatchModel | None = None, tables=None):
-        from . import kernel
-        if device not in DEVICES:
-            raise ValueError(f"device = {device!r} is not known; allowed values {DEVICES}")
-        if device == "gpu" and (error := kernel.gpu_error()):
+        if error := kernel.device_error(device):
             raise ValueError(error)
         model = model or BatchModel.of(params)
         drives, states, group, sides, volts = checked(params, model, drives, states, group, sides, volts)
@@ -168,7 +162,6 @@ class Ensemble:
         nodes (the harness's measure). Trajectories whose events could not be located (never seen)
         are set aside as NaN and flagged in :attr:`failed`.
         """
-        from . import kernel
         periods = whole(periods)
         out = kernel.march(self.device, self._tables, self._state, self.failed, self.group, periods, observe)
         self.periods += periods
@@ -183,7 +176,6 @@ class Ensemble:
         Lyapunov exponent. Returns host arrays (periods, n): ``logs``, the log of each period's
         stretch; ``samples``, ``p`` at each section; ``impacts``; ``top`` and ``bottom``; and
         ``offset`` (n, 4), the companion's offset at the end."""
-        from . import kernel
         periods = whole(periods)
         offset = np.ascontiguousarray(np.asarray(offset, dtype=float).T)
         out = kernel.separate(self.device, self._tables, self._state, self.failed, self.group, offset,
@@ -199,26 +191,3 @@ def whole(periods) -> int:
         raise ValueError(f"periods = {periods!r} is out of range; allowed range [1, inf) (whole numbers)")
     return int(periods)
 
-
-def hermite_extremes(xp, p0, v0, p1, v1, h):
-    """The largest and smallest value of the cubic Hermite interpolant between ``(p0, v0)`` and
-    ``(p1, v1)`` over a step ``h`` (s), ends included (``piezo_fmu_harness.periodic.drive``), on
-    arrays of the namespace ``xp``."""
-    m0, m1 = h * v0, h * v1
-    a = 6.0 * (p0 - p1) + 3.0 * (m0 + m1)
-    b = 6.0 * (p1 - p0) - 4.0 * m0 - 2.0 * m1
-    c = m0
-    disc = xp.sqrt(xp.maximum(b * b - 4.0 * a * c, 0.0))
-    quadratic = xp.abs(a) > 1e-300
-    safe_a = xp.where(quadratic, 2.0 * a, 1.0)
-    safe_b = xp.where(b == 0.0, 1.0, b)
-    high, low = xp.maximum(p0, p1), xp.minimum(p0, p1)
-    for root in ((-b + disc) / safe_a, (-b - disc) / safe_a):
-        s = xp.where(quadratic, root, -c / safe_b)
-        inside = (s > 0.0) & (s < 1.0) & ~(~quadratic & (b == 0.0))
-        s = xp.where(inside, s, 0.0)
-        value = ((2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0
-                 + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * m1)
-        high = xp.where(inside, xp.maximum(high, value), high)
-        low = xp.where(inside, xp.minimum(low, value), low)
-    return high, low

@@ -1,5 +1,5 @@
-"""The two phases of the damper in closed form, for arrays of trajectories (docs/model.md
-sections 2-3).
+"""What the batch engine needs of one damper: the two phases in closed form, the bounds that make
+event location rigorous, and the switch rules' masses (docs/model.md sections 2-3).
 
 Relative to a base moving as a ramp (one hold step, :mod:`.drive`), ``u = p - y`` and ``w = q - y``,
 every phase is linear and unforced:
@@ -25,8 +25,8 @@ every phase is linear and unforced:
   diagonalisation with a real part of rounding's size, either sign; one that is positive, and within
   :data:`ROUNDING` of the spectral radius, is taken as 0: the mode keeps its size.
 
-Both bounds make event location rigorous (:mod:`.events`): a step shorter than the bound allows
-cannot jump over a contact.
+Both bounds make event location rigorous (:mod:`.kernel.location`): a step shorter than the bound
+allows cannot jump over a contact.
 """
 
 from __future__ import annotations
@@ -40,14 +40,14 @@ from scipy.linalg import matrix_balance
 from ...model.damper import Damper
 from ...model.dynamics import DU, DW, ONE, RIGHT, U, VOLT, W
 from ...model.parameters import Parameters
+from ...model.rounding import EPS, NOISE_ULPS
 
 #: Condition number of the contact phase's (balanced) eigenvectors beyond which it counts as
 #: defective: the closed form would lose more than about 1e-8 of the state to rounding.
 MAX_CONDITION = 1e8
-#: The largest positive real part of a contact mode taken as 0 (of the spectral radius): 64 ulp, where
-#: 3,000 dampers with an undamped contact or main mass drawn over the property tests' ranges gave at
-#: most 0.78 ulp.
-ROUNDING = 64.0 * 2.0**-52
+#: The largest positive real part of a contact mode taken as 0, relative to the spectral radius: the
+#: rounding level of an event function (an undamped mode comes out of ``eig`` within about 1 ulp).
+ROUNDING = NOISE_ULPS * EPS
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,21 +68,21 @@ class FreeFlow:
         """``w_n + 2a`` (1/s): ``|u''| <= bound_rate * sqrt(u'^2 + w_n^2 u^2)``."""
         return math.sqrt(self.w2) + 2.0 * self.a
 
-    def _cs(self, xp, t):
+    def _cs(self, t):
         beta2 = self.beta2
         if abs(beta2) <= 1e-12 * self.w2:  # critical damping, to rounding
             bt2 = beta2 * t * t
             return 1.0 + bt2 / 2.0, t * (1.0 + bt2 / 6.0)
         if beta2 < 0.0:
             wd = math.sqrt(-beta2)
-            return xp.cos(wd * t), xp.sin(wd * t) / wd
+            return np.cos(wd * t), np.sin(wd * t) / wd
         b = math.sqrt(beta2)
-        return xp.cosh(b * t), xp.sinh(b * t) / b
+        return np.cosh(b * t), np.sinh(b * t) / b
 
-    def coefficients(self, xp, t) -> tuple:
+    def coefficients(self, t) -> tuple:
         """``(e^{-a t} c(t), e^{-a t} s(t))`` for the times ``t`` (s), to apply with :meth:`apply`."""
-        c, s = self._cs(xp, t)
-        decay = xp.exp(-self.a * t)
+        c, s = self._cs(t)
+        decay = np.exp(-self.a * t)
         return decay * c, decay * s
 
     def apply(self, coefficients: tuple, u, du) -> tuple:

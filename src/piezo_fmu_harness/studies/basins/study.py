@@ -4,7 +4,7 @@ at one frequency.
 A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the middle of the gap
 (``q0 = p0``, ``q0' = 0``), the base starting at phase 0. Every start is marched on the batch
 engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (the rule of
-``piezo_fmu.solver.batch.settle``): a stable orbit it is seen converging to, with its impact
+``piezo_fmu.solver.batch.attractors.settle``): a stable orbit it is seen converging to, with its impact
 sequence, the motion without impacts once it provably never reaches a barrier again, or, after
 the budget of ``--max-cycles`` periods, **undecided** (issue 31: a cap is a budget, not a
 verdict), unless the map's survival curve shows that what is left persists and the start's own

@@ -4,7 +4,7 @@ down in frequency with the damper.
 
 Each frequency starts from where the previous one's motion goes, as the frequency response's sweeps
 do, and is marched on the batch engine (``piezo_fmu.solver.batch``) until its own trajectory shows
-what it reaches (the rule of ``piezo_fmu.solver.batch.settle``): a stable orbit of order ``n``
+what it reaches (the rule of ``piezo_fmu.solver.batch.attractors.settle``): a stable orbit of order ``n``
 gives its ``n`` section samples, the motion without impacts its one; a motion that reaches no
 orbit within the budget ``--max-cycles`` gives the samples of its measuring window (its last
 :data:`SAMPLES` periods) and its class. The two sweeps are two chains of tasks of the sweep

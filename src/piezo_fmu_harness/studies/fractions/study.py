@@ -2,7 +2,7 @@
 
 At each of ``--count`` frequencies from ``--ratio-min`` to ``--ratio-max`` times ``sqrt(K/M)``,
 ``--starts`` random starts are marched on the batch engine (``piezo_fmu.solver.batch``) to the
-motion each one's trajectory reaches (the rule of ``piezo_fmu.solver.batch.settle``), and the
+motion each one's trajectory reaches (the rule of ``piezo_fmu.solver.batch.attractors.settle``), and the
 fraction of the starts on each attractor is its share. This answers a designer's question that
 continuation, which follows one orbit at a time, cannot: how likely the good motion is.
 

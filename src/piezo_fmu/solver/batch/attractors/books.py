@@ -1,34 +1,34 @@
-"""The bookkeeping of :func:`.settle.settle` between two blocks of marching, compiled (issue 32):
-which trajectories' returns shrink (the seeds of Newton), how far each section is from a known
-orbit, and which trajectories are proved free for ever.
+"""The bookkeeping of :func:`.settle.settle` between two blocks of marching, compiled on the CPU
+with the kernel: which trajectories' returns shrink (the seeds of Newton), how far each section is
+from a known orbit, and which trajectories are proved free for ever.
 
-``settle`` looks at every open trajectory after each block: the returns over every order at the
-start and at the end of its history, and the distance of each of its sections to each known orbit.
-Written with numpy, each look built arrays of ``periods x trajectories x orders x 4``: in the
-default ``fractions`` (one process), the labelling took 12.6 s and the screen about 13 s of the 66 s
-spent beside the kernel's 229 s; compiled, 4.5 s and 2.9 s (``docs/benchmarks.md``). These loops do the
-same arithmetic on the same numbers, element by element (``|(a - b) s|``, ``|a s - o|``), with
-numpy's rules for NaN (a largest or smallest value is NaN when any is; the first NaN is the
-smallest), so they give numpy's answers bit for bit. They are compiled with the kernel, in its
-cache (:mod:`.kernel`), for the CPU only: the history is kept on the host.
+Each is what a few numpy expressions over ``periods x trajectories x orders x 4`` arrays would
+compute, element by element, with numpy's rules for NaN (a largest or smallest value is NaN when any
+is; the first NaN is the smallest), so they give numpy's answers bit for bit (the tests hold them to
+those expressions) without building the arrays.
 """
 
 import math
 
-from .kernel_phases import NAN, fmax
+import numpy as np
+
+from ..kernel.registry import entry, source
+from ..kernel.scalars import NAN, fmax
 
 
+@source(inline=True)
 def largest4(a, b, c, d):
-    """numpy's ``max`` of four values: NaN when any is (the kernel's :func:`.kernel_phases.fmax`)."""
+    """numpy's ``max`` of four values: NaN when any is (:func:`..kernel.scalars.fmax`)."""
     return fmax(fmax(a, b), fmax(c, d))
 
 
+@entry
 def shrinking_returns(sections, scale, open_, most, reach):
     """``(most, n)``: whether trajectory ``j``'s return over the order ``k + 1`` shrank by half over
     its history ``sections`` ((periods, n, 4), scaled by ``scale`` (n, 4)) and ends within ``reach``
     times its size (``settle._find_orbits``); False for a trajectory not ``open_``."""
     span, n = sections.shape[0], sections.shape[1]
-    out = np.zeros((most, n), np.bool_)  # noqa: F821 (a global of the compiled namespace)
+    out = np.zeros((most, n), np.bool_)
     end = span - 1
     for j in range(n):
         if not open_[j]:
@@ -50,13 +50,14 @@ def shrinking_returns(sections, scale, open_, most, reach):
     return out
 
 
+@entry
 def converging_orders(shrinking, impacts, sides):
     """``(n,)``: the least order ``k + 1`` at which trajectory ``j``'s returns shrink
     (``shrinking[k, j]``) and its history ((periods, n): ``impacts`` and ``sides``) repeats the
     same impacts and sides at that lag in every period; 0 for none (``settle._find_orbits``)."""
     most, n = shrinking.shape[0], shrinking.shape[1]
     span = impacts.shape[0]
-    out = np.zeros(n, np.int64)  # noqa: F821 (a global of the compiled namespace)
+    out = np.zeros(n, np.int64)
     for j in range(n):
         for k in range(most):
             if not shrinking[k, j]:
@@ -73,13 +74,14 @@ def converging_orders(shrinking, impacts, sides):
     return out
 
 
+@entry
 def orbit_distances(sections, scale, points):
     """The scaled distance of each section ((periods, n, 4), scaled by ``scale`` (4,)) to the
     nearest of an orbit's scaled ``points`` ((m, 4)), and that point's index
     (``settle._distances``)."""
     span, n, m = sections.shape[0], sections.shape[1], points.shape[0]
-    gaps = np.empty((span, n))  # noqa: F821
-    nearest = np.zeros((span, n), np.int64)  # noqa: F821
+    gaps = np.empty((span, n))
+    nearest = np.zeros((span, n), np.int64)
     s0, s1, s2, s3 = scale[0], scale[1], scale[2], scale[3]
     for t in range(span):
         for j in range(n):
@@ -99,6 +101,7 @@ def orbit_distances(sections, scale, points):
     return gaps, nearest
 
 
+@entry
 def free_for_ever_flags(sections, sides, open_, p0, dp0, w2, low, high, hg):
     """:func:`.orbits.free_for_ever` for the ``open_`` ones of ``sections`` ((n, 4) at the section)
     and ``sides`` ((n,)) against the linear orbit through ``(p0, dp0)`` bounded by ``low`` and
@@ -106,7 +109,7 @@ def free_for_ever_flags(sections, sides, open_, p0, dp0, w2, low, high, hg):
     block, for every open trajectory of a cloud: numpy's dozen small array operations and its
     error state cost ten times the arithmetic."""
     n = sections.shape[0]
-    out = np.zeros(n, np.bool_)  # noqa: F821 (a global of the compiled namespace)
+    out = np.zeros(n, np.bool_)
     root = math.sqrt(w2)
     margin = 1e-9 * hg
     inner, outer = hg - margin, -hg + margin

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .drive import HarmonicHold
-from .ensemble import Ensemble
+from ..drive import HarmonicHold
+from ..ensemble import Ensemble
 
 #: The companion of the Lyapunov exponent, relative to the state's size.
 COMPANION = 1e-8

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .drive import HarmonicHold
-from .ensemble import Ensemble, hermite_extremes
-from .phases import BatchModel
+from ..drive import HarmonicHold
+from ..ensemble import Ensemble
+from ..model import BatchModel
 
 #: Forward-difference step of Newton's Jacobian, relative to the state's size.
 NEWTON_STEP = 1e-7
@@ -101,11 +101,11 @@ class LinearOrbit:
 
 
 def linear_orbit(model: BatchModel, drive: HarmonicHold) -> LinearOrbit:
-    """:class:`LinearOrbit` of ``drive`` (host floats, the closed form of :mod:`.phases`)."""
+    """:class:`LinearOrbit` of ``drive`` (host floats, the closed form of :mod:`..model`)."""
     free = model.free
     y, v = (nodes.tolist() for nodes in drive.nodes())  # Python floats: the same arithmetic, faster
     h = drive.step
-    ec, es = free.coefficients(np, np.array(h))
+    ec, es = free.coefficients(np.array(h))
     ec, es = float(ec), float(es)
 
     def step(k, p, dp):
@@ -136,7 +136,29 @@ def linear_orbit(model: BatchModel, drive: HarmonicHold) -> LinearOrbit:
 
 
 def _hermite_range(nodes: np.ndarray, h: float) -> tuple[float, float]:
-    high, low = hermite_extremes(np, nodes[:-1, 0], nodes[:-1, 1], nodes[1:, 0], nodes[1:, 1], h)
+    """The largest and smallest ``p`` (m) of the cubic Hermite interpolant of ``nodes`` ((N+1, 2):
+    ``p, p'``, ``h`` (s) apart), ends included, with numpy's arithmetic, as the harness measures a
+    motion through the FMU (``piezo_fmu_harness.periodic.drive.hermite_extrema``; the kernel's
+    :func:`..kernel.periods.hermite_extremes` differs from it in the last bit, where ``s**3`` is
+    rounded once here and twice there)."""
+    p0, v0, p1, v1 = nodes[:-1, 0], nodes[:-1, 1], nodes[1:, 0], nodes[1:, 1]
+    m0, m1 = h * v0, h * v1
+    a = 6.0 * (p0 - p1) + 3.0 * (m0 + m1)
+    b = 6.0 * (p1 - p0) - 4.0 * m0 - 2.0 * m1
+    c = m0
+    disc = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    quadratic = np.abs(a) > 1e-300
+    safe_a = np.where(quadratic, 2.0 * a, 1.0)
+    safe_b = np.where(b == 0.0, 1.0, b)
+    high, low = np.maximum(p0, p1), np.minimum(p0, p1)
+    for root in ((-b + disc) / safe_a, (-b - disc) / safe_a):
+        s = np.where(quadratic, root, -c / safe_b)
+        inside = (s > 0.0) & (s < 1.0) & ~(~quadratic & (b == 0.0))
+        s = np.where(inside, s, 0.0)
+        value = ((2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0
+                 + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * m1)
+        high = np.where(inside, np.maximum(high, value), high)
+        low = np.where(inside, np.minimum(low, value), low)
     return float(high.max()), float(low.min())
 
 
@@ -144,7 +166,7 @@ def free_for_ever(model: BatchModel, orbit: LinearOrbit, states: np.ndarray, sid
     """Which of ``states`` (at the section, (n, 4)) never impact again: free, the impact mass at
     rest, and ``q - p*`` kept inside the gap by a margin larger than the transient can still move
     the main mass (see the module's text). A proof for each True; False says nothing. ``settle``
-    runs its compiled twin at every look (:func:`.kernel_books.free_for_ever_flags`, held to this
+    runs its compiled twin at every look (:func:`.books.free_for_ever_flags`, held to this
     one by the tests)."""
     p, dp, q, dq = states.T
     w2 = model.free.w2
@@ -163,8 +185,7 @@ class OrbitFinder:
 
     Its ensembles march on the CPU, whatever device a study's starts march on: Newton's seeds, their
     neighbours and the checks of an orbit are thousands of ensembles of a few trajectories, and on a
-    GPU each launch costs milliseconds of transfers and latency (13,235 of them were 60 s of an 82 s
-    ``settle`` on an H200; docs/benchmarks.md)."""
+    GPU each launch costs milliseconds of transfers and latency."""
 
     def __init__(self, model: BatchModel, drives: list, tolerance):
         self.model, self.drives = model, list(drives)
@@ -176,7 +197,7 @@ class OrbitFinder:
     def tables(self):
         """The damper and the drives packed for the compiled kernel, once."""
         if self._tables is None:
-            from .kernel import Tables
+            from ..kernel import Tables
             self._tables = Tables(self.model, self.drives)
         return self._tables
 

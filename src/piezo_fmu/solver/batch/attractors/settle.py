@@ -2,7 +2,7 @@
 
 **The rule.** The motion reported for a start is the one its trajectory reaches. A stable orbit
 found by Newton is not enough: Newton converges to whatever orbit lies near, and a trajectory can
-pass close to one stable orbit on its way to another (issue 26). So the starts are marched, a
+pass close to one stable orbit on its way to another. So the starts are marched, a
 block of periods at a time, and a start is labelled only when its own trajectory shows where it
 goes:
 
@@ -17,7 +17,7 @@ goes:
   never reaches a barrier again (:func:`.orbits.free_for_ever`): it ends on the family of orbits
   without impacts, whatever the slowly decaying transient (about 100 periods an e-fold at
   ``zeta = 0.0016``) still does.
-- **undecided**: no label within ``max_cycles``. The cap is a budget, not a verdict (issue 31):
+- **undecided**: no label within ``max_cycles``. The cap is a budget, not a verdict:
   a start that has not been seen reaching an orbit may be on a long chaotic transient, on an orbit
   longer than ``max_order``, or on an attractor that is not periodic, and one trajectory cannot
   say which. Its largest Lyapunov exponent with a 95% interval (a companion trajectory ``1e-8``
@@ -38,12 +38,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .drive import HarmonicHold
-from .ensemble import Ensemble
-from .namespace import to_numpy
+from ..drive import HarmonicHold
+from ..ensemble import Ensemble
+from ..kernel import target
+from ..model import BatchModel
+from . import books
+from .measures import empty_measures, measure
 from .orbits import LinearOrbit, Orbit, OrbitFinder, linear_orbit, scale_of
-from .trajectories import empty_measures, measure
-from .phases import BatchModel
 
 #: A trajectory is taken to be on its way to an orbit within this fraction of the orbit's size.
 LINEAR_REACH = 0.05
@@ -196,7 +197,7 @@ def settle(params, drives, starts, groups=None, settings: SettleSettings = Settl
         marched += periods
         history = _extend(history, record, 2 * settings.block + settings.max_order)
         g = groups[ids]
-        failed = to_numpy(ens.failed).astype(bool)
+        failed = ens.failed.astype(bool)
         state.labels[ids[failed]] = -2
         state.periods[ids[failed]] = marched
         _label_quiet(state, model, linear, quiet, ids, g, record["sections"][-1], record["sides"][-1], marched)
@@ -253,9 +254,9 @@ def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marc
         mask = (groups == g) & (state.labels[ids] == -1)
         if not mask.any():
             continue
-        # free_for_ever's proof, compiled (:func:`.kernel_books.free_for_ever_flags`)
+        # free_for_ever's proof, compiled (:func:`.books.free_for_ever_flags`)
         orbit = linear[g]
-        calm = _books()["free_for_ever_flags"](np.ascontiguousarray(sections, float), np.asarray(sides, float), mask,
+        calm = _compiled(books.free_for_ever_flags)(np.ascontiguousarray(sections, float), np.asarray(sides, float), mask,
                                                float(orbit.nodes[0, 0]), float(orbit.nodes[0, 1]), float(model.free.w2),
                                                float(orbit.low), float(orbit.high), float(model.half_gap))
         if calm.any():
@@ -269,16 +270,16 @@ def _label_quiet(state, model, linear, quiet, ids, groups, sections, sides, marc
 
 def _distances(history, scale, orbit: Orbit) -> tuple[np.ndarray, np.ndarray]:
     """Scaled distance of each section (periods, m) to the nearest point of ``orbit``, and that
-    point's index (compiled: :func:`.kernel_books.orbit_distances`)."""
+    point's index (compiled: :func:`.books.orbit_distances`)."""
     points = orbit.sections * scale
-    return _books()["orbit_distances"](np.ascontiguousarray(history["sections"], float),
+    return _compiled(books.orbit_distances)(np.ascontiguousarray(history["sections"], float),
                                        np.ascontiguousarray(scale, float), np.ascontiguousarray(points, float))
 
 
-def _books() -> dict:
-    """The compiled bookkeeping (:mod:`.kernel_books`), from the kernel's CPU namespace."""
-    from . import kernel
-    return kernel.target("cpu")
+def _compiled(function):
+    """The bookkeeping ``function`` of :mod:`.books`, compiled on the CPU (the history is kept on
+    the host)."""
+    return target("cpu")(function)
 
 
 def _label_orbits(state, history, ids, groups, scales, tolerance, marched) -> None:
@@ -320,14 +321,14 @@ def _find_orbits(state, finder, history, ids, groups, scales, settings) -> None:
         return
     # the return over each order at the history's start and at its end, all orders at once (row
     # k is the order k + 1: sections[1:] and, backwards from the last but one, sections[span - 2::-1]),
-    # compiled (:func:`.kernel_books.shrinking_returns`)
-    shrinking = _books()["shrinking_returns"](np.ascontiguousarray(sections, float),
+    # compiled (:func:`.books.shrinking_returns`)
+    shrinking = _compiled(books.shrinking_returns)(np.ascontiguousarray(sections, float),
                                               np.ascontiguousarray(scales[groups], float), open_, most, SEED_REACH)
     if not shrinking.any():
         return
     # each trajectory's least order whose returns shrink with the same impacts and sides at that lag
-    # in every period (compiled: :func:`.kernel_books.converging_orders`), the seeds by order
-    orders = _books()["converging_orders"](shrinking, np.ascontiguousarray(impacts, np.int64),
+    # in every period (compiled: :func:`.books.converging_orders`), the seeds by order
+    orders = _compiled(books.converging_orders)(shrinking, np.ascontiguousarray(impacts, np.int64),
                                            np.ascontiguousarray(sides, np.int64))
     for order in np.unique(orders[orders > 0]).tolist():
         chosen[order] = np.flatnonzero(orders == order).tolist()

@@ -1,44 +1,51 @@
-"""Where numba keeps the kernel's compiled CPU code: one folder for every version of the source,
-shared by every copy of it.
+"""Where numba keeps the kernel's compiled CPU code: one folder for every version of the batch
+engine's source, shared by every copy of it.
 
-numba keys a cached function by its source file's content (a SHA-256 stamp) and its bytecode, but
-puts it in a folder named after the file's directory. A host process that loaded an FMU imports
-``piezo_fmu`` from that FMU's unpacked copy, in a fresh temporary folder each time, and would
-compile the kernel anew in every such process (tens of seconds). This locator puts the compiled
-code of the kernel (:mod:`.kernel_phases`, :mod:`.kernel_source`, :mod:`.kernel_flow`,
-:mod:`.kernel_books` and the drivers of :mod:`.kernel`), from wherever it was imported, in one
-folder, so every copy with the same content finds it.
+numba keys a cached function by its source file's content and its bytecode, but puts it in a folder
+named after the file's directory. A host process that loaded an FMU imports ``piezo_fmu`` from the
+FMU's unpacked copy, in a fresh temporary folder each time, and would compile the kernel anew in
+every such process. The locator installed here keeps the compiled code of every function of the
+batch engine (``piezo_fmu/solver/batch``), from wherever it was imported, in one folder named by the
+content of all the engine's files (:func:`version_folder`): every copy with the same content finds
+it, and a changed file, even one whose functions did not change, means a fresh folder (a function's
+compiled code holds the functions it calls, compiled as their registration said: the content of one
+file alone does not tell whether it is still valid). numba's other functions are untouched.
 
-**The folder is named by the content of all the kernel's files** (their SHA-256), not only each file's
-own: a function's compiled code holds the functions it calls, and :mod:`.kernel` decides how they
-are compiled (which are inlined into their callers). In one folder for every version, a caller
-compiled under one version's :data:`.kernel.INLINE` stayed valid for another (its own file had not
-changed) and was loaded beside code compiled afresh: a cache left so by an ``INLINE`` changed and
-changed back crashed the Lyapunov march in about half the processes (a segmentation fault), where
-a fresh cache never did. Now a changed file means a fresh folder, compiled once; the old folders
-stay until removed (a few MB each). numba's other functions are untouched.
-
-**A folder that cannot be written** (a home that is not the user's, a read-only container) would
-make numba refuse to compile at all ("no locator available"): :func:`unwritable` says why before
-anything is compiled, and the kernel is then compiled for its process alone, with a warning.
+A folder that cannot be written (a home that is not the user's, a read-only container) would make
+numba refuse to compile at all: :func:`unwritable` says why beforehand, and the kernel is then
+compiled for its process alone.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
+#: The batch engine's package folder, whose files' content names the cache's folder.
+PACKAGE = Path(__file__).resolve().parents[1]
+#: The last parts of that folder's path, in any copy of the package.
+PARTS = ("piezo_fmu", "solver", "batch")
 
-def version_folder(files: tuple, folder: Path) -> Path:
-    """The folder under ``folder`` for this content of ``files``: their SHA-256 together, with
-    numba's version."""
-    import hashlib
 
+def cache_dir() -> Path:
+    """Where the compiled CPU code is kept: ``$NUMBA_CACHE_DIR``, else ``~/.cache/piezo-fmu/numba``
+    (``$XDG_CACHE_HOME`` respected)."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "piezo-fmu" / "numba"
+
+
+def version_folder(folder: Path, package: Path = PACKAGE) -> Path:
+    """The folder under ``folder`` for this content of the engine's source files (every ``*.py``
+    under ``package``, by their path in it): their SHA-256 together, with numba's version."""
     import numba
 
     digest = hashlib.sha256(numba.__version__.encode())
-    for name in files:
-        digest.update(Path(name).read_bytes())
+    for path in sorted(package.rglob("*.py")):
+        digest.update(path.relative_to(package).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
     return Path(folder) / digest.hexdigest()[:16]
 
 
@@ -55,16 +62,20 @@ def unwritable(folder: Path) -> str | None:
     return None
 
 
-def install(files: tuple, folder: Path) -> None:
-    """Put the locator in front of numba's own, for the functions of ``files`` (their names, under
-    a ``piezo_fmu/solver/batch`` folder), once per process; their compiled code is kept in
-    ``folder`` (their :func:`version_folder`)."""
+def _in_package(py_file: str) -> bool:
+    """Whether ``py_file`` lies in a copy of the batch engine's package, at any depth."""
+    parts = Path(py_file).parent.parts
+    return any(parts[k:k + len(PARTS)] == PARTS for k in range(len(parts) - len(PARTS) + 1))
+
+
+def install(folder: Path) -> None:
+    """Put the locator in front of numba's own, once per process: the compiled code of the batch
+    engine's functions is kept in ``folder`` (its :func:`version_folder`)."""
     from numba.core import caching
 
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     if any(getattr(cls, "_piezo_fmu", False) for cls in impl._locator_classes):
         return
-    names = {os.path.basename(f) for f in files}
 
     class KernelLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
         _piezo_fmu = True
@@ -79,8 +90,7 @@ def install(files: tuple, folder: Path) -> None:
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            path = Path(py_file)
-            if path.name not in names or path.parent.parts[-3:] != ("piezo_fmu", "solver", "batch"):
+            if not _in_package(py_file):
                 return None
             return super().from_function(py_func, py_file)
 

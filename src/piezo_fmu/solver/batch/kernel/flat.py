@@ -1,124 +1,111 @@
-"""The kernel's march as one flat loop of small steps, for a GPU (issue 32): the same motion as
-:func:`.kernel_source.march_one`, bit for bit, in another order of work.
+"""The march of a GPU: :func:`.periods.march_one` as one flat loop of small pieces of work, the same
+motion bit for bit in another order of work.
 
-**Why.** On a GPU the 32 threads of a warp execute one instruction together. ``march_one`` nests
-three loops of different lengths for different trajectories: the hold steps of a period, the event
-rounds of a step, the iterations of an event search. A warp then waits, in every hold step, for its
-slowest thread's search: measured with Nsight Compute on an H200, 3.3 of a warp's 32 threads were
-active on average, and the launch ran 15 times slower than on 1,000,000 copies of one start.
+On a GPU the 32 threads of a warp execute one instruction together, and the nested loops of
+``march_one`` (the hold steps of a period, the rounds of a step, the iterations of a search) have
+different lengths for different trajectories: a warp would wait, at every hold step, for its
+slowest thread's search. Here each trajectory's work is cut into the pieces those loops are made of,
+and one loop runs them: each pass does, for every trajectory, at most one hold step's start, one
+round's start, one step of its search and one round's end. A warp's threads stay together at the
+top of the loop, whatever each has left to do.
 
-**How.** Each trajectory's work is cut into the pieces those loops are made of, and one loop runs
-them: each pass does, for every trajectory, at most one hold step's start, one round's start, one
-iteration of its event search (one evaluation of the event functions) and one round's end. A warp's
-threads stay together at the top of the loop, whatever each has left to do; a trajectory that
-finishes early waits only at the end of the launch.
-
-**Same bits.** The pieces are the source's own functions (:func:`.kernel_phases.free_start`,
-:func:`.kernel_phases.contact_start`, :func:`.kernel_phases.locate_step`,
-:func:`.kernel_source.round_end`, :func:`.kernel_source.free_step`), called with the same numbers
-in the same order for each trajectory: only the interleaving of trajectories differs. The tests
-run both on the CPU and compare the bits.
+The pieces are the source's own functions, called with the same numbers in the same order for each
+trajectory: only the interleaving of trajectories differs, so both marches give the same bits.
 """
 
-from .kernel_phases import INF, MAX_ITERATIONS, NAN, contact_start, fmax, fmin, free_start, locate_step
-from .kernel_source import (DONE, FAILED, MAX_ROUNDS, NODES, STEP, EC, ES, DECAY, contact_voltage, free_step,
-                            hermite_extremes, round_end, round_start)
+from .layout import NODES
+from .location import MAX_ITERATIONS, locate_step, onset_side, phase_start, search_start
+from .periods import hermite_extremes, hold_of, motion_of, store_motion, store_period
+from .registry import source
+from .rounds import DONE, FAILED, MAX_ROUNDS, contact_voltage, free_step, round_end, round_start
+from .scalars import INF, NAN, fmax, fmin
 
 #: What a trajectory does next: start a hold step, start a round, search, end a round, end a step.
 AT_STEP, AT_ROUND, AT_SEARCH, AT_END, AT_STEP_END = range(5)
 
 
+@source
 def march_one_flat(observe, i, state, failed, groups, drive, c, sections, sides, impacts, tops, bottoms, work):
-    """:func:`.kernel_source.march_one` (the same arguments, the same results) as one loop."""
-    p, dp, q, dq, side, vl, vr = (state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
-                                  state[6, i])
+    """:func:`.periods.march_one` (the same arguments, the same results) as one loop."""
+    x = motion_of(state, i)
     bad = failed[i]
     g = groups[i]
-    h, ec, es, decay = drive[g, STEP], drive[g, EC], drive[g, ES], drive[g, DECAY]
+    hold = hold_of(drive, g)
+    h = hold[0]
     samples = (drive.shape[1] - NODES - 1) // 2
     periods = sections.shape[0]
     period = k = onsets = 0
-    top = bottom = p if observe and not bad else NAN
-    phase = AT_STEP
+    top = bottom = x[0] if observe and not bad else NAN
+    stage = AT_STEP
     # the hold step's, the round's and the search's state
-    y0 = v = p0 = dp0 = tl = 0.0
-    instant = step_onsets = rounds = iterations = 0
-    u = du = w = dw = rem = base = bound = s = t = g_a = g_b = dg_a = dg_b = tol = t_ev = to = 0.0
-    held_a = held_b = contact = search_bad = False
+    y0 = v = p0 = dp0 = bound = to = 0.0
+    progress = (0.0, 0, 0)
+    rounds = iterations = 0
+    start = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    phase = (0.0, 0.0, 0.0, 0.0, 0.0)
+    search = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    event = (0.0, 0.0, False)
+    held_a = held_b = False
     while period < periods:
         end_period = bad
-        if not bad and phase == AT_STEP:
+        if not bad and stage == AT_STEP:
             y0, v = drive[g, NODES + k], drive[g, NODES + samples + 1 + k]
-            p0, dp0 = p, dp
-            step_onsets = 0
-            phase = AT_ROUND
-            if side == 0.0:
-                p1, dp1, q1, dq1, possible = free_step(p, dp, q, dq, y0, v, h, ec, es, c)
+            p0, dp0 = x[0], x[1]
+            stage = AT_ROUND
+            if x[4] == 0.0:
+                x1, possible = free_step(x, y0, v, hold, c)
                 if not possible:
-                    p, dp, q, dq, vl, vr = p1, dp1, q1, dq1, vl * decay, vr * decay
-                    phase = AT_STEP_END
-            tl = 0.0
-            instant = rounds = 0
-        if not bad and phase == AT_ROUND:
+                    x = x1
+                    stage = AT_STEP_END
+            progress = (0.0, 0, 0)
+            rounds = 0
+        if not bad and stage == AT_ROUND:
             if rounds == MAX_ROUNDS:
                 bad = True
             else:
                 rounds += 1
-                u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
-                contact = side != 0.0
-                if contact:
-                    now, g_a, dg_a, tol, held_a, bound = contact_start(c, u, du, w, dw, side,
-                                                                       contact_voltage(side, vl, vr, c), work)
-                    g_b, dg_b, held_b, to, s = -INF, 0.0, False, 0.0, side
-                else:
-                    now, to, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, bound = free_start(c, work, u, du, w, dw)
-                    s = 0.0
+                start = round_start(x, y0, v, progress[0], h)
+                phase = (start[0], start[1], start[2], start[3], x[4])
+                now, to, first, held_a, held_b, bound = phase_start(c, work, phase,
+                                                                    contact_voltage(x[4], x[5], x[6], c))
                 if now:
-                    t_ev, search_bad = 0.0, False
-                    phase = AT_END
+                    event = (0.0, to, False)
+                    stage = AT_END
                 else:
-                    g_a = 0.0 if held_a else g_a
-                    g_b = 0.0 if held_b else g_b
-                    t = 0.0
+                    search = search_start(first, held_a, held_b)
                     iterations = 0
-                    phase = AT_SEARCH
-        if not bad and phase == AT_SEARCH:
-            found, t_ev, which, search_bad, t, g_a, g_b, dg_a, dg_b, tol = locate_step(
-                contact, t, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, rem, bound, c, u, du, w, dw, s, work)
+                    stage = AT_SEARCH
+        if not bad and stage == AT_SEARCH:
+            found, t_ev, which, search_bad, search = locate_step(search, held_a, held_b, start[4], bound, phase, c,
+                                                                 work)
             held_a = held_b = False
             iterations += 1
             if not found and iterations == MAX_ITERATIONS:
                 found, t_ev, which, search_bad = True, INF, 0, True
             if found:
-                to = 0.0 if contact else (1.0 if which == 0 else -1.0)
-                phase = AT_END
-        if not bad and phase == AT_END:
-            p, dp, q, dq, side, vl, vr, tl, instant, step_onsets, status = round_end(
-                u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, step_onsets, t_ev, to, search_bad, c, work)
+                event = (t_ev, onset_side(phase, which, to), search_bad)
+                stage = AT_END
+        if not bad and stage == AT_END:
+            x, progress, status = round_end(start, x, event, v, h, progress, c, work)
             bad = status == FAILED
-            phase = AT_STEP_END if status == DONE else AT_ROUND
+            stage = AT_STEP_END if status == DONE else AT_ROUND
         if bad and not end_period:  # failed in this pass: the period ends here, NaN
-            p = dp = q = dq = top = bottom = NAN
-            side = 0.0
-            onsets += step_onsets
+            x = (NAN, NAN, NAN, NAN, 0.0, x[5], x[6])
+            top = bottom = NAN
+            onsets += progress[2]
             end_period = True
-        if not bad and phase == AT_STEP_END:
-            onsets += step_onsets
+        if not bad and stage == AT_STEP_END:
+            onsets += progress[2]
             if observe:
-                high, low = hermite_extremes(p0, dp0, p, dp, h)
+                high, low = hermite_extremes(p0, dp0, x[0], x[1], h)
                 top, bottom = fmax(top, high), fmin(bottom, low)
             k += 1
-            phase = AT_STEP
+            stage = AT_STEP
             end_period = k == samples
         if end_period:
-            sections[period, i, 0], sections[period, i, 1] = p, dp
-            sections[period, i, 2], sections[period, i, 3] = q, dq
-            sides[period, i] = side
-            impacts[period, i] = onsets
-            tops[period, i], bottoms[period, i] = top, bottom
+            store_period(i, period, x, onsets, top, bottom, sections, sides, impacts, tops, bottoms)
             period += 1
             k = onsets = 0
-            top = bottom = p if observe and not bad else NAN
-    state[0, i], state[1, i], state[2, i], state[3, i] = p, dp, q, dq
-    state[4, i], state[5, i], state[6, i] = side, vl, vr
+            top = bottom = x[0] if observe and not bad else NAN
+    store_motion(state, i, x)
     failed[i] = bad

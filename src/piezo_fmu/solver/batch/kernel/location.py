@@ -1,102 +1,49 @@
-"""The phases of one trajectory in closed form and the location of its next switch, as scalar code:
-the first half of the compiled kernel's source (issue 32; :mod:`.kernel_source` steps with it, and
-:mod:`.kernel` compiles both for the CPU and for a GPU).
+"""Where a trajectory's phase switches next: rigorous event location on the closed form of its phase.
 
-These are the closed forms of :mod:`.phases` and the event location of :mod:`.events` for one
-trajectory: free flight (the damped oscillator relative to a ramping base), contact in modal form,
-and the first zero of an event function found by steps never longer than the first root of
-``g + g' dt + B dt^2 / 2`` (``B >= |g''|`` from the present instant on), so that no contact is jumped.
+A switch is the first zero of an event function ``g`` (negative while the phase lasts): in free
+flight the impact mass's distance beyond a barrier, ``+-(w - u) - d/2`` (the contact onsets, right
+``a`` and left ``b``); in contact the deflection turned over, ``-delta`` (the separation). With a
+bound ``B >= |g''|`` that holds from the present instant on (:mod:`..model`), ``g`` stays below
+``g(t) + g'(t) dt + B dt^2 / 2`` over the next ``dt``, so it has no zero before the first root of
+that parabola: stepping by it never jumps over a switch, however grazing. Near a simple zero the
+steps converge quadratically (Newton's step from the safe side); near a tangency they shrink
+geometrically and pass it. A zero is taken when ``g`` is within rounding of 0
+(:data:`~piezo_fmu.model.rounding.NOISE_ULPS` ulp of the quantities it is made of) while moving
+outwards; a touch within rounding while moving inwards is no switch, as in the scalar core.
 
-The damper's constants come packed in one array ``c`` (the offsets below): the free flight's and
-the switch rules' numbers, then the contact's modes, padded to :data:`MODES` (a padded mode has a
-zero amplitude: it adds exact zeros): eigenvalues, ``|lam|^2``, gains, ``Q^-1`` and ``Q``, real parts
-then imaginary parts, matrices row by row, each mode's weight and the number of modes used. A
-complex pair of modes is carried once, with weight 2: the state is real, so its two terms are each
-other's conjugates and their sum is twice the real part of one; a real mode has weight 1.
+**At the start of a phase** (after a switch, or at a hold step where the impact mass sits on a
+barrier to rounding) the function is zero, and its sign just after is that of the relative velocity
+towards the barrier or, when that is zero to rounding too, of the relative acceleration without the
+barrier's force (:func:`.switches.approach_sign`): the scalar core's rule, so that both codes decide
+grazing contacts alike.
 
-The rules of :mod:`.kernel_source` hold here too: scalars, ``math`` and arrays passed in, nothing else.
+A phase is the tuple ``(u, u', w, w', s)``: the state relative to the base at the start of the
+search (m, m/s) and the side ``s`` in contact (+1 right, -1 left, 0 free). A search's state is
+``(t, g_a, g_b, g_a', g_b', tol)``: the time from the phase start (s), the event functions and
+their rates there (``g_b`` is ``-inf`` in contact), and their rounding level (m).
 """
 
 import math
 
-# Offsets into ``c``.
-A, W2, BETA2, CS_MODE, WD, BOUND_RATE, HG, MM, M1, MI, M_EQ, KK, CC, COUPLED, TAU_E = range(15)
-#: ``CS_MODE``: critical damping (series), underdamped (cos, sin), overdamped (cosh, sinh).
-CRITICAL, UNDERDAMPED, OVERDAMPED = 0.0, 1.0, 2.0
-#: Contact modes carried (4 states, or 5 with the voltage under ``voltage_model = 2``).
-MODES = 5
-LAM = 15
-LAM2 = LAM + 2 * MODES
-GAIN = LAM2 + MODES
-QINV = GAIN + 2 * MODES
-QM = QINV + 2 * MODES * MODES
-WEIGHT = QM + 2 * MODES * MODES
-USED = WEIGHT + MODES
-CONSTANTS = USED + 1
-#: Scratch floats per trajectory: the modal amplitudes alpha and c = alpha * gain (re, im), then the
-#: last evaluation of each phase's event function kept for the step that follows it: the modes'
-#: ``e^{lam t}`` (re, im) at the time ``CONTACT_AT``, and free flight's coefficients at ``FREE_AT``.
-#: The step to a located switch reuses them (the same numbers, not computed twice).
-GROWTH = 4 * MODES
-CONTACT_AT = 6 * MODES
-FREE_AT, FREE_EC, FREE_ES = CONTACT_AT + 1, CONTACT_AT + 2, CONTACT_AT + 3
-WORK = CONTACT_AT + 4
-# The array engine's constants (:mod:`.events`), repeated: the kernel's source imports nothing but
-# math and itself.
-NOISE_ULPS = 64.0
-EPS = 2.0**-52
-ZERO = 1e-13
+from ....model.rounding import EPS, NOISE_ULPS, ZERO
+from .flows import contact_value, free_apply, free_coefficients
+from .layout import (BOUND_RATE, CC, CONTACT_AT, FREE_AT, FREE_EC, FREE_ES, GAIN, HG, KK, LAM2, MODES, QINV, USED,
+                     W2, WEIGHT)
+from .registry import source
+from .scalars import INF, NAN, fmax, fmin, sign
+from .switches import approach_sign
+
+#: Safe steps of one search before the location is declared failed: a simple zero is reached in 3 to
+#: 6, a tangency to rounding passed in about 60; a contact resting on its barrier through a hold step
+#: is proved to stay there in steps of ``sqrt(2 |g| / B)`` (thousands). The cap stops a search that
+#: cannot advance (a step below the rounding of ``t``).
 MAX_ITERATIONS = 1_000_000
-INF = math.inf
-NAN = math.nan
 
 
-def fmax(a, b):
-    """numpy's ``maximum``: NaN when either is."""
-    if a != a or b != b:
-        return NAN
-    return a if a >= b else b
-
-
-def fmin(a, b):
-    """numpy's ``minimum``: NaN when either is."""
-    if a != a or b != b:
-        return NAN
-    return a if a <= b else b
-
-
-def sign(x):
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return x  # 0.0, -0.0 or NaN, as numpy's sign
-
-
-def free_coefficients(c, t):
-    """``(e^{-a t} c(t), e^{-a t} s(t))`` of free flight (``FreeFlow.coefficients``)."""
-    mode = c[CS_MODE]
-    if mode == CRITICAL:
-        bt2 = c[BETA2] * t * t
-        cos, sin = 1.0 + bt2 / 2.0, t * (1.0 + bt2 / 6.0)
-    elif mode == UNDERDAMPED:
-        wd = c[WD]
-        cos, sin = math.cos(wd * t), math.sin(wd * t) / wd
-    else:
-        b = c[WD]
-        cos, sin = math.cosh(b * t), math.sinh(b * t) / b
-    decay = math.exp(-c[A] * t)
-    return decay * cos, decay * sin
-
-
-def free_apply(c, ec, es, u, du):
-    """``(u(t), u'(t))`` of free flight from ``(u0, u0')`` (``FreeFlow.apply``)."""
-    a, w2 = c[A], c[W2]
-    return ec * u + es * (a * u + du), ec * du - es * (w2 * u + a * du)
-
-
+@source(inline=True)
 def safe_step(g, dg, bound):
-    """The first positive root of ``g + dg dt + bound dt^2 / 2`` (``events.safe_step``)."""
+    """The first positive root of ``g + dg dt + bound dt^2 / 2`` (s): inf when there is none, NaN
+    for a NaN bound."""
     disc = math.sqrt(fmax(dg * dg - 2.0 * bound * g, 0.0))
     if dg > 0.0:
         return -2.0 * g / (dg + disc)
@@ -107,16 +54,21 @@ def safe_step(g, dg, bound):
     return INF
 
 
+@source(inline=True)
 def start_sign(rate, rate_noise, K, C, u, du, barrier):
-    """+1 into the barrier just after a phase start, -1 away (``events.start_sign``)."""
+    """+1 into the ``barrier`` (+1 right, -1 left) just after a phase start, -1 away, 0 undecided:
+    the sign of the relative velocity ``rate`` towards it when that exceeds its rounding level
+    ``rate_noise``, else :func:`.switches.approach_sign`."""
     if abs(rate) > rate_noise:
         return sign(rate)
-    return sign(barrier * (K * u + C * du))
+    return approach_sign(K, C, u, du, barrier)
 
 
-def free_values(c, work, u, du, w, dw, t):
-    """The two event functions of free flight at ``t`` (right onset, left onset), their rates and
-    their rounding level."""
+@source
+def free_values(c, work, phase, t):
+    """The two event functions of free flight at ``t`` (s) (right onset, left onset), their rates and
+    their rounding level; keeps free flight's coefficients at ``t`` in ``work``."""
+    u, du, w, dw, _ = phase
     hg = c[HG]
     ec, es = free_coefficients(c, t)
     work[FREE_AT], work[FREE_EC], work[FREE_ES] = t, ec, es
@@ -126,66 +78,10 @@ def free_values(c, work, u, du, w, dw, t):
     return rr - hg, -rr - hg, drr, -drr, NOISE_ULPS * EPS * (abs(uu) + abs(ww) + hg)
 
 
-def contact_value(s, c, work, t):
-    """The separation's event function ``-delta`` at ``t`` and its rate, from the modal
-    amplitudes ``c = alpha * gain`` in ``work``."""
-    total = rate = 0.0
-    for j in range(int(c[USED])):
-        cr, ci = work[2 * MODES + j], work[3 * MODES + j]
-        lr, li = c[LAM + j], c[LAM + MODES + j]
-        grow = math.exp(lr * t)
-        xr, xi = grow * math.cos(li * t), grow * math.sin(li * t)
-        work[GROWTH + j], work[GROWTH + MODES + j] = xr, xi
-        tr, ti = cr * xr - ci * xi, cr * xi + ci * xr
-        total += c[WEIGHT + j] * tr
-        rate += c[WEIGHT + j] * (tr * lr - ti * li)
-    work[CONTACT_AT] = t
-    return -s * total, -s * rate
-
-
-def locate_step(contact, t, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, remaining, bound, c, u, du, w, dw, s,
-                work):
-    """One iteration of :func:`locate`: ``(done, time, which, failed, t, g_a, g_b, dg_a, dg_b, tol)``,
-    the last six the search's state for the next iteration (the event functions at ``t``)."""
-    fired_a = g_a >= -tol and dg_a > 0.0 and not held_a
-    fired_b = g_b >= -tol and dg_b > 0.0 and not held_b
-    if fired_a or fired_b:
-        return True, t, 0 if fired_a else 1, False, t, g_a, g_b, dg_a, dg_b, tol
-    step_a = safe_step(-tol if g_a >= -tol else fmin(g_a, 0.0), dg_a, bound)
-    step_b = safe_step(-tol if g_b >= -tol else fmin(g_b, 0.0), dg_b, bound)
-    after = t + fmin(step_a, step_b)
-    if after >= remaining:
-        return True, INF, 0, False, t, g_a, g_b, dg_a, dg_b, tol
-    if not math.isfinite(after):
-        return True, INF, 0, True, t, g_a, g_b, dg_a, dg_b, tol
-    t = after
-    if contact:
-        g_a, dg_a = contact_value(s, c, work, t)
-    else:
-        g_a, g_b, dg_a, dg_b, tol = free_values(c, work, u, du, w, dw, t)
-    return False, INF, 0, False, t, g_a, g_b, dg_a, dg_b, tol
-
-
-def locate(contact, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, remaining, bound, c, u, du, w, dw, s, work):
-    """The first zero of a trajectory's event functions from its phase start on, within
-    ``remaining`` (``events.locate``): ``(time, which, failed)``, ``time`` inf when none. Free
-    flight has two functions (``a`` right, ``b`` left); contact one (``a``; ``b`` is ``-inf``)."""
-    g_a = 0.0 if near_a else g_a
-    g_b = 0.0 if near_b else g_b
-    held_a, held_b = near_a, near_b
-    t = 0.0
-    for _ in range(MAX_ITERATIONS):
-        done, time, which, failed, t, g_a, g_b, dg_a, dg_b, tol = locate_step(
-            contact, t, g_a, g_b, dg_a, dg_b, tol, held_a, held_b, remaining, bound, c, u, du, w, dw, s, work)
-        if done:
-            return time, which, failed
-        held_a = held_b = False
-    return INF, 0, True
-
-
-def free_start(c, work, u, du, w, dw):
-    """The start of :func:`free_event`: ``(now, barrier, g_a, g_b, dg_a, dg_b, tol, near_a, near_b,
-    bound)``, ``now`` when an onset is due at once (at ``barrier``), else the search's start."""
+@source(inline=True)
+def free_start(c, work, phase):
+    """The start of a free flight's search, as :func:`phase_start` returns it."""
+    u, du, w, dw, _ = phase
     hg = c[HG]
     work[FREE_AT] = NAN
     r, dr = w - u, dw - du
@@ -197,23 +93,15 @@ def free_start(c, work, u, du, w, dw):
     now_a = near_a and start_sign(dr, rate_noise, c[KK], c[CC], u, du, 1.0) > 0.0
     now_b = near_b and start_sign(-dr, rate_noise, c[KK], c[CC], u, du, -1.0) > 0.0
     bound = c[BOUND_RATE] * math.sqrt(du * du + c[W2] * u * u)
-    return now_a or now_b, 1.0 if now_a else -1.0, g_a, g_b, dr, -dr, tol, near_a, near_b, bound
+    return now_a or now_b, 1.0 if now_a else -1.0, (g_a, g_b, dr, -dr, tol), near_a, near_b, bound
 
 
-def free_event(c, work, u, du, w, dw, rem):
-    """The next contact onset of a free trajectory within ``rem`` (s): ``(time, barrier,
-    failed)``, time inf when none (``rounds._free_events``)."""
-    now, barrier, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, bound = free_start(c, work, u, du, w, dw)
-    if now:
-        return 0.0, barrier, False
-    time, which, failed = locate(False, g_a, g_b, dg_a, dg_b, tol, near_a, near_b, rem, bound, c, u, du, w, dw, 0.0,
-                                 work)
-    return time, 1.0 if which == 0 else -1.0, failed
-
-
-def contact_start(c, u, du, w, dw, s, volt, work):
-    """The start of :func:`contact_event`: ``(now, g, dg, tol, near, bound)``, ``now`` when the
-    separation is due at once, else the search's start; leaves the modal amplitudes in ``work``."""
+@source(inline=True)
+def contact_start(c, work, phase, volt):
+    """The start of a contact's search, as :func:`phase_start` returns it; leaves the modal
+    amplitudes of the state (with the patch voltage ``volt`` (V) of the barrier in contact) in
+    ``work``."""
+    u, du, w, dw, s = phase
     hg = c[HG]
     work[CONTACT_AT] = NAN
     col = (u, w - s * hg, du, dw, s * volt)
@@ -235,38 +123,84 @@ def contact_start(c, u, du, w, dw, s, volt, work):
     near = abs(delta) <= fmax(tol, ZERO * 2.0 * hg)
     rate_noise = NOISE_ULPS * EPS * (abs(dw) + abs(du))
     now = near and start_sign(rate, rate_noise, c[KK], c[CC], u, du, s) < 0.0
-    return now, -delta, -rate, tol, near, bound
+    return now, 0.0, (-delta, -INF, -rate, 0.0, tol), near, False, bound
 
 
-def contact_event(c, u, du, w, dw, s, volt, rem, work):
-    """The separation of a trajectory in contact within ``rem`` (s): ``(time, failed)``; leaves its
-    modal amplitudes in ``work`` (``rounds._contact_events``)."""
-    now, g, dg, tol, near, bound = contact_start(c, u, du, w, dw, s, volt, work)
+@source(inline=True)
+def phase_start(c, work, phase, volt):
+    """The start of the search for the switch of ``phase``: ``(now, to, start, near_a, near_b, bound)``,
+    ``now`` when the switch is due at once (to the side ``to`` for an onset), else ``start``, the
+    event functions, their rates and rounding level ``(g_a, g_b, g_a', g_b', tol)``, which of them
+    are zero to rounding at the start (``near_a``, ``near_b``: they cannot fire at once), and the
+    bound ``B`` (m/s^2)."""
+    if phase[4] != 0.0:
+        return contact_start(c, work, phase, volt)
+    return free_start(c, work, phase)
+
+
+@source(inline=True)
+def search_start(start, near_a, near_b):
+    """A search's state at the phase start, from :func:`phase_start`'s ``start``: a function zero to
+    rounding there starts at exactly 0."""
+    g_a, g_b, dg_a, dg_b, tol = start
+    return 0.0, 0.0 if near_a else g_a, 0.0 if near_b else g_b, dg_a, dg_b, tol
+
+
+@source(inline=True)
+def onset_side(phase, which, to):
+    """The side a switch found by a search leads to: the barrier of the function ``which`` (0 right,
+    1 left) in free flight, ``to`` (free) in contact."""
+    return to if phase[4] != 0.0 else (1.0 if which == 0 else -1.0)
+
+
+@source(inline=True)
+def locate_step(search, held_a, held_b, remaining, bound, phase, c, work):
+    """One safe step of a search from its state ``search``: ``(done, time, which, failed, search)``,
+    ``time`` (s) the switch of function ``which`` (inf when there is none within ``remaining``
+    seconds), ``search`` the state after the step. A function ``held`` (zero to rounding at the
+    phase start) cannot fire before the first step."""
+    t, g_a, g_b, dg_a, dg_b, tol = search
+    fired_a = g_a >= -tol and dg_a > 0.0 and not held_a
+    fired_b = g_b >= -tol and dg_b > 0.0 and not held_b
+    if fired_a or fired_b:
+        return True, t, 0 if fired_a else 1, False, search
+    step_a = safe_step(-tol if g_a >= -tol else fmin(g_a, 0.0), dg_a, bound)
+    step_b = safe_step(-tol if g_b >= -tol else fmin(g_b, 0.0), dg_b, bound)
+    after = t + fmin(step_a, step_b)
+    if after >= remaining:
+        return True, INF, 0, False, search
+    if not math.isfinite(after):
+        return True, INF, 0, True, search
+    t = after
+    s = phase[4]
+    if s != 0.0:
+        g_a, dg_a = contact_value(s, c, work, t)
+    else:
+        g_a, g_b, dg_a, dg_b, tol = free_values(c, work, phase, t)
+    return False, INF, 0, False, (t, g_a, g_b, dg_a, dg_b, tol)
+
+
+@source
+def locate(start, near_a, near_b, remaining, bound, phase, c, work):
+    """The first switch of ``phase`` within ``remaining`` (s), from :func:`phase_start`'s values:
+    ``(time, which, failed)``, ``time`` inf when there is none."""
+    search = search_start(start, near_a, near_b)
+    held_a, held_b = near_a, near_b
+    for _ in range(MAX_ITERATIONS):
+        done, time, which, failed, search = locate_step(search, held_a, held_b, remaining, bound, phase, c, work)
+        if done:
+            return time, which, failed
+        held_a = held_b = False
+    return INF, 0, True
+
+
+@source
+def next_event(c, work, phase, volt, remaining):
+    """The next switch of ``phase`` within ``remaining`` (s): ``(time, to, failed)``, ``time`` inf
+    when there is none, ``to`` the side it leads to; ``volt`` (V) the patch voltage of the barrier
+    in contact. Leaves in ``work`` what the step to it reuses."""
+    now, to, start, near_a, near_b, bound = phase_start(c, work, phase, volt)
     if now:
-        return 0.0, False
-    time, _, failed = locate(True, g, -INF, dg, 0.0, tol, near, False, rem, bound, c, u, du, w, dw, s, work)
-    return time, failed
-
-
-def contact_state(c, work, t):
-    """The contact state ``e(t)`` relative to the rest in contact (``u, w - s d/2, u', w'``, and
-    ``s V`` under ``voltage_model = 2``), from the modal amplitudes in ``work``
-    (``rounds._modal_state``)."""
-    e0 = e1 = e2 = e3 = e4 = 0.0
-    m2 = MODES * MODES
-    known = work[CONTACT_AT] == t
-    for j in range(int(c[USED])):
-        ar, ai = work[j], work[MODES + j]
-        if known:
-            gr, gi = work[GROWTH + j], work[GROWTH + MODES + j]
-        else:
-            grow = math.exp(c[LAM + j] * t)
-            gr, gi = grow * math.cos(c[LAM + MODES + j] * t), grow * math.sin(c[LAM + MODES + j] * t)
-        weight = c[WEIGHT + j]
-        xr, xi = weight * (ar * gr - ai * gi), weight * (ar * gi + ai * gr)
-        e0 += xr * c[QM + j] - xi * c[QM + m2 + j]
-        e1 += xr * c[QM + MODES + j] - xi * c[QM + m2 + MODES + j]
-        e2 += xr * c[QM + 2 * MODES + j] - xi * c[QM + m2 + 2 * MODES + j]
-        e3 += xr * c[QM + 3 * MODES + j] - xi * c[QM + m2 + 3 * MODES + j]
-        e4 += xr * c[QM + 4 * MODES + j] - xi * c[QM + m2 + 4 * MODES + j]
-    return e0, e1, e2, e3, e4
+        return 0.0, to, False
+    time, which, failed = locate(start, near_a, near_b, remaining, bound, phase, c, work)
+    return time, onset_side(phase, which, to), failed

@@ -1,53 +1,61 @@
-"""The motion of one trajectory through its hold steps, as scalar code: the source of the compiled
-kernel (issue 32), for the CPU and for a GPU alike (:mod:`.kernel` compiles these functions twice).
+"""One hold step of one trajectory: in one closed form of free flight when no contact is possible
+in it, else by event rounds, from switch to switch, to the step's end.
 
-Everything here and in :mod:`.kernel_phases` is the physics of :mod:`.phases`, :mod:`.events` and
-:mod:`.rounds` (the array engine), written for one trajectory: free flight and contact in closed
-form, the rigorous event location (a step never longer than the first root of
-``g + g' dt + B dt^2 / 2``), the start-of-phase rule and the switch rules, and the first-order-hold
-drive. It is the array engine's motion, with
-other roundings: the sums over the contact's modes run in order here and pairwise in numpy, and
-``cos`` and ``exp`` are the C library's here and numpy's there (both differ in the last bit).
+Over a hold step the base is the ramp ``y0 + v t`` (:mod:`..drive`), so in coordinates relative to
+it every phase is linear and unforced. A round starts where the trajectory stands, locates its
+next switch (:mod:`.location`), moves it there or to the step's end in closed form (:mod:`.flows`)
+and applies the switch rules (:mod:`.switches`); under ``voltage_model = 2`` the patch of the barrier
+in contact carries its voltage in the contact state, and both voltages decay through the load
+otherwise.
 
-The rules that make the same source compile for both targets: only scalars, ``math``, tuples and
-arrays passed in (a scratch row ``work`` of ``WORK`` floats for the contact's modal amplitudes);
-no allocation, no exception, no numpy call; complex numbers as pairs of floats. Run as plain Python
-(slowly), these functions are the kernel itself: the tests use that to read it.
-
-The damper's constants come packed in one array ``c`` (:mod:`.kernel_phases`); the drives as one
-row each of ``drive``: the hold step, its free-flight coefficients and voltage decay, the ``N + 1``
-node values and the ``N`` slopes.
+A trajectory's motion is the tuple ``(p, p', q, q', side, V_left, V_right)`` (m, m/s, the phase: 0
+free, +1 or -1 in contact with that barrier, V); a hold step's constants are ``(h, e^{-a h} c(h),
+e^{-a h} s(h), decay)`` from its drive's row (:mod:`.layout`).
 """
 
 import math
 
-from .kernel_phases import (COUPLED, EPS, FREE_AT, FREE_EC, FREE_ES, HG, INF, M1, M_EQ, MI, MM, NAN, NOISE_ULPS,
-                            TAU_E, W2, ZERO, BOUND_RATE, contact_event, contact_state, fmax, fmin, free_apply,
-                            free_coefficients, free_event)
+from ....model.rounding import EPS, MAX_SWITCHES_AT_ONE_INSTANT, NOISE_ULPS, ZERO
+from .flows import contact_state, free_apply, free_coefficients
+from .layout import BOUND_RATE, COUPLED, FREE_AT, FREE_EC, FREE_ES, HG, M1, M_EQ, MI, MM, TAU_E, W2
+from .location import next_event
+from .registry import source
+from .scalars import NAN, fmax, fmin
+from .switches import capture, release
 
-#: Switches of one trajectory at one instant before it is declared degenerate (the core's limit).
-MAX_SWITCHES_AT_ONE_INSTANT = 8
 #: Rounds of one hold step before the trajectory is declared degenerate.
 MAX_ROUNDS = 10_000
-# Offsets into a row of ``drive``: the step (s), ``e^{-a h} c(h)``, ``e^{-a h} s(h)``, the voltage's
-# decay over a step, then the nodes (m) and the slopes (m/s).
-STEP, EC, ES, DECAY, NODES = range(5)
 #: How a round ends (:func:`round_end`): another round, the step's end, or a failed location.
 GOING, DONE, FAILED = 0, 1, 2
 
 
-def round_start(p, dp, q, dq, y0, v, tl, h):
-    """A round's state relative to the base at ``tl`` into the step: ``(u, u', w, w', rem, base)``."""
+@source(inline=True)
+def round_start(x, y0, v, tl, h):
+    """A round's start, ``tl`` (s) into a hold step of length ``h`` with base ``y0 + v t``:
+    ``(u, u', w, w', rem, base)``, the motion relative to the base, the time left in the step and
+    the base there (m)."""
     base = y0 + v * tl
-    return p - base, dp - v, q - base, dq - v, h - tl, base
+    return x[0] - base, x[1] - v, x[2] - base, x[3] - v, h - tl, base
 
 
-def round_end(u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, onsets, t_ev, to, bad, c, work):
-    """A round's end, from its start (:func:`round_start`'s values) and its event search's result
-    ``t_ev`` (s, inf when none within the step), ``to`` (the barrier of an onset) and ``bad``: the
-    trajectory moved to the event or the step's end, the switch rules applied. Returns ``(p, p', q,
-    q', side, vl, vr, tl, instant, onsets, status)``, ``status`` :data:`GOING` (another round),
-    :data:`DONE` (the step's end) or :data:`FAILED` (the state NaN)."""
+@source(inline=True)
+def contact_voltage(side, vl, vr, c):
+    """The voltage (V) of the barrier in contact, as the contact's modes take it (0 one-way)."""
+    return (vr if side > 0.0 else vl) if c[COUPLED] != 0.0 else 0.0
+
+
+@source(inline=True)
+def round_end(start, x, event, v, h, progress, c, work):
+    """A round's end, from its ``start`` (:func:`round_start`), the motion ``x`` it started from and
+    its search's ``event`` ``(time, to, failed)`` (:func:`.location.next_event`): the trajectory moved
+    to the switch or the step's end, the switch rules applied. ``progress`` is the step's
+    ``(tl, instant, onsets)``: the time into it (s), the switches at the present instant and the
+    contact onsets so far. Returns ``(x, progress, status)``, ``status`` :data:`GOING` (another
+    round), :data:`DONE` (the step's end) or :data:`FAILED` (the state NaN)."""
+    u, du, w, dw, rem, base = start
+    side, vl, vr = x[4], x[5], x[6]
+    t_ev, to, bad = event
+    tl, instant, onsets = progress
     hg = c[HG]
     coupled = c[COUPLED] != 0.0
     free = side == 0.0
@@ -75,55 +83,44 @@ def round_end(u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, onsets, 
                 vl = in_contact
             else:
                 vr = in_contact
-    onset = switch and free
-    release = switch and not free
-    if onset:
-        dq = (c[MI] * dq + c[M_EQ] * dp) / (c[MI] + c[M_EQ])
+    if switch and free:
+        dq = capture(c[MI], c[M_EQ], dp, dq)
         side = to
         onsets += 1
-    elif release:
-        dp = (c[M1] * dp + c[M_EQ] * dq) / c[MM]
+    elif switch:
+        dp = release(c[MM], c[M1], c[M_EQ], dp, dq)
         side = 0.0
     instant = instant + 1 if switch and dt == 0.0 else 0
     bad = bad or instant > MAX_SWITCHES_AT_ONE_INSTANT or not math.isfinite(p + q + dp + dq)
     if bad:
-        return NAN, NAN, NAN, NAN, 0.0, vl, vr, tl, instant, onsets, FAILED
+        return (NAN, NAN, NAN, NAN, 0.0, vl, vr), (tl, instant, onsets), FAILED
     tl = tl + dt if switch else h + 0.0 * tl
     if not switch or tl >= h:
-        return p, dp, q, dq, side, vl, vr, tl, instant, onsets, DONE
-    return p, dp, q, dq, side, vl, vr, tl, instant, onsets, GOING
+        return (p, dp, q, dq, side, vl, vr), (tl, instant, onsets), DONE
+    return (p, dp, q, dq, side, vl, vr), (tl, instant, onsets), GOING
 
 
-def contact_voltage(side, vl, vr, c):
-    """The voltage of the barrier in contact, as the contact's modes take it (0 one-way)."""
-    return (vr if side > 0.0 else vl) if c[COUPLED] != 0.0 else 0.0
-
-
-def event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work):
-    """A hold step of a trajectory that may switch in it, event by event to the step's end
-    (``rounds.event_rounds``): ``(p, p', q, q', side, vl, vr, onsets, failed)``."""
-    tl = 0.0
-    instant = 0
-    onsets = 0
+@source
+def event_rounds(x, y0, v, h, c, work):
+    """A hold step of a trajectory that may switch in it, event by event to the step's end:
+    ``(x, onsets, failed)``."""
+    progress = (0.0, 0, 0)
     for _ in range(MAX_ROUNDS):
-        u, du, w, dw, rem, base = round_start(p, dp, q, dq, y0, v, tl, h)
-        to = 0.0
-        if side == 0.0:
-            t_ev, to, bad = free_event(c, work, u, du, w, dw, rem)
-        else:
-            t_ev, bad = contact_event(c, u, du, w, dw, side, contact_voltage(side, vl, vr, c), rem, work)
-        p, dp, q, dq, side, vl, vr, tl, instant, onsets, status = round_end(
-            u, du, w, dw, rem, base, side, vl, vr, v, h, tl, instant, onsets, t_ev, to, bad, c, work)
-        if status == FAILED:
-            return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True
-        if status == DONE:
-            return p, dp, q, dq, side, vl, vr, onsets, False
-    return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True
+        start = round_start(x, y0, v, progress[0], h)
+        phase = (start[0], start[1], start[2], start[3], x[4])
+        event = next_event(c, work, phase, contact_voltage(x[4], x[5], x[6], c), start[4])
+        x, progress, status = round_end(start, x, event, v, h, progress, c, work)
+        if status != GOING:
+            return x, progress[2], status == FAILED
+    return (NAN, NAN, NAN, NAN, 0.0, x[5], x[6]), progress[2], True
 
 
-def free_step(p, dp, q, dq, y0, v, h, ec, es, c):
-    """A hold step in one closed form of free flight: ``(p, p', q, q', possible)``, ``possible``
-    when a contact may fall in the step (then the step must go by event rounds instead)."""
+@source(inline=True)
+def free_step(x, y0, v, hold, c):
+    """A free trajectory's hold step in one closed form: ``(x, possible)``, ``possible`` when a
+    contact may fall in the step (the step must then go by event rounds instead)."""
+    p, dp, q, dq = x[0], x[1], x[2], x[3]
+    h, ec, es, decay = hold
     hg = c[HG]
     u, du = p - y0, dp - v
     u1, du1 = free_apply(c, ec, es, u, du)
@@ -133,120 +130,17 @@ def free_step(p, dp, q, dq, y0, v, h, ec, es, c):
     reach = fmax(abs(q - p), abs(q1 - p1)) + bound * (h * h / 8.0)
     tol = NOISE_ULPS * EPS * (abs(u) + abs(q - y0) + hg)
     margin = 2.0 * fmax(tol, ZERO * 2.0 * hg)
-    return p1, dp1, q1, dq, reach >= hg - margin
+    return (p1, dp1, q1, dq, x[4], x[5] * decay, x[6] * decay), reach >= hg - margin
 
 
-def hold_step(p, dp, q, dq, side, vl, vr, y0, v, h, ec, es, decay, c, work):
-    """One hold step (base ``y0 + v t`` over ``h``): free flight in one closed form when no contact
-    is possible in it, else the event rounds (``Ensemble._step``). Returns the new state, the
-    contact onsets in the step and whether the location failed."""
-    if side == 0.0:
-        p1, dp1, q1, dq1, possible = free_step(p, dp, q, dq, y0, v, h, ec, es, c)
+@source
+def hold_step(x, y0, v, hold, c, work):
+    """One hold step of a trajectory (base ``y0 + v t``, constants ``hold``): free flight in one
+    closed form when no contact is possible in it, else the event rounds. Returns ``(x, onsets,
+    failed)``: the motion at the step's end, the contact onsets in it and whether a location
+    failed."""
+    if x[4] == 0.0:
+        x1, possible = free_step(x, y0, v, hold, c)
         if not possible:
-            return p1, dp1, q1, dq1, side, vl * decay, vr * decay, 0, False
-    return event_rounds(p, dp, q, dq, side, vl, vr, y0, v, h, c, work)
-
-
-def hermite_extremes(p0, v0, p1, v1, h):
-    """The largest and smallest value of the cubic Hermite interpolant over a step
-    (``ensemble.hermite_extremes``)."""
-    m0, m1 = h * v0, h * v1
-    a = 6.0 * (p0 - p1) + 3.0 * (m0 + m1)
-    b = 6.0 * (p1 - p0) - 4.0 * m0 - 2.0 * m1
-    c = m0
-    disc = math.sqrt(fmax(b * b - 4.0 * a * c, 0.0))
-    quadratic = abs(a) > 1e-300
-    safe_a = 2.0 * a if quadratic else 1.0
-    safe_b = 1.0 if b == 0.0 else b
-    high, low = fmax(p0, p1), fmin(p0, p1)
-    for k in range(2):
-        root = (-b + disc) / safe_a if k == 0 else (-b - disc) / safe_a
-        s = root if quadratic else -c / safe_b
-        if s > 0.0 and s < 1.0 and (quadratic or b != 0.0):
-            s2 = s * s
-            s3 = s2 * s
-            value = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * m1)
-            high, low = fmax(high, value), fmin(low, value)
-    return high, low
-
-
-def one_period(observe, p, dp, q, dq, side, vl, vr, g, drive, c,
-               work):
-    """One forcing period of a trajectory under drive ``g``: ``(p, p', q, q', side, vl, vr, onsets,
-    failed, top, bottom)``, ``top``/``bottom`` the extremes of ``p`` (the Hermite interpolant of the
-    hold nodes) when ``observe``, else NaN."""
-    h, ec, es, decay = drive[g, STEP], drive[g, EC], drive[g, ES], drive[g, DECAY]
-    samples = (drive.shape[1] - NODES - 1) // 2
-    onsets = 0
-    top = bottom = p if observe else NAN
-    for k in range(samples):
-        p0, dp0 = p, dp
-        p, dp, q, dq, side, vl, vr, count, failed = hold_step(p, dp, q, dq, side, vl, vr, drive[g, NODES + k],
-                                                              drive[g, NODES + samples + 1 + k], h, ec, es, decay,
-                                                              c, work)
-        onsets += count
-        if failed:
-            return NAN, NAN, NAN, NAN, 0.0, vl, vr, onsets, True, NAN, NAN
-        if observe:
-            high, low = hermite_extremes(p0, dp0, p, dp, h)
-            top, bottom = fmax(top, high), fmin(bottom, low)
-    return p, dp, q, dq, side, vl, vr, onsets, False, top, bottom
-
-
-def march_one(observe, i, state, failed, groups, drive, c, sections,
-              sides, impacts, tops, bottoms, work):
-    """Trajectory ``i`` of ``state`` ((7, n): ``p, p', q, q'``, side, left and right voltage) through
-    ``sections.shape[0]`` periods, in place; each period's section state, phase, onsets and (when
-    ``observe``) extremes of ``p`` written to the outputs. A failed trajectory stays NaN."""
-    p, dp, q, dq, side, vl, vr = (state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
-                                  state[6, i])
-    bad = failed[i]
-    g = groups[i]
-    for period in range(sections.shape[0]):
-        onsets = 0
-        top = bottom = NAN
-        if not bad:
-            p, dp, q, dq, side, vl, vr, onsets, bad, top, bottom = one_period(
-                observe, p, dp, q, dq, side, vl, vr, g, drive, c, work)
-        sections[period, i, 0], sections[period, i, 1] = p, dp
-        sections[period, i, 2], sections[period, i, 3] = q, dq
-        sides[period, i] = side
-        impacts[period, i] = onsets
-        tops[period, i], bottoms[period, i] = top, bottom
-    state[0, i], state[1, i], state[2, i], state[3, i] = p, dp, q, dq
-    state[4, i], state[5, i], state[6, i] = side, vl, vr
-    failed[i] = bad
-
-
-def separate_one(i, state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms, work):
-    """Trajectory ``i`` beside a companion ``offset[:, i]`` away (the same phase and voltages),
-    brought back to the distance ``delta[i]`` (m, with ``scale``) along their separation after every
-    period (``trajectories.measure``): the log of each period's stretch, ``p`` at each section, the
-    onsets and extremes of the trajectory. State and offset are left as at the end."""
-    p, dp, q, dq, side, vl, vr = (state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
-                                  state[6, i])
-    o0, o1, o2, o3 = offset[0, i], offset[1, i], offset[2, i], offset[3, i]
-    bad = failed[i]
-    g = groups[i]
-    d = delta[i]
-    for period in range(logs.shape[0]):
-        c0, c1, c2, c3 = p + o0, dp + o1, q + o2, dq + o3
-        onsets = 0
-        top = bottom = NAN
-        if not bad:
-            c0, c1, c2, c3, _, _, _, _, _, _, _ = one_period(False, c0, c1, c2, c3, side, vl, vr, g, drive, c, work)
-            p, dp, q, dq, side, vl, vr, onsets, bad, top, bottom = one_period(True, p, dp, q, dq, side, vl, vr, g, drive,
-                                                                              c, work)
-        e0, e1 = (c0 - p) * scale[0, i], (c1 - dp) * scale[1, i]
-        e2, e3 = (c2 - q) * scale[2, i], (c3 - dq) * scale[3, i]
-        gap = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
-        logs[period, i] = math.log(gap / d) if gap > 0.0 else -INF
-        ratio = d / gap if gap > 0.0 else NAN
-        o0, o1, o2, o3 = (c0 - p) * ratio, (c1 - dp) * ratio, (c2 - q) * ratio, (c3 - dq) * ratio
-        samples[period, i] = p
-        impacts[period, i] = onsets
-        tops[period, i], bottoms[period, i] = top, bottom
-    state[0, i], state[1, i], state[2, i], state[3, i] = p, dp, q, dq
-    state[4, i], state[5, i], state[6, i] = side, vl, vr
-    offset[0, i], offset[1, i], offset[2, i], offset[3, i] = o0, o1, o2, o3
-    failed[i] = bad
+            return x1, 0, False
+    return event_rounds(x, y0, v, hold[0], c, work)
