@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from ...periodic.attractors import boundary, merge, shares
-from ...periodic.many import chunks
+from ...periodic.many import check_chunk, chunks
 from ...periodic.transients import counts, escape
-from ...store import open_folder
+from ...store import open_folder, within
 
 HEADER_FILE = "basins.json"
 #: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude,
@@ -107,7 +107,19 @@ def open_basins(model, spec: BasinSpec, folder: Path, resume: bool, force: bool)
     header = {**spec.to_dict(), "fmu_guid": model.guid}
     # the FMU's checks come after the chunks: a resumed map may ask for others
     same = tuple(k for k in header if k not in ("confirm", "seed"))
-    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "basin map")
+    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "basin map",
+                       check=record_check(spec))
+
+
+def record_check(spec: BasinSpec):
+    """The check of a recorded chunk (:func:`piezo_fmu_harness.store.open_folder`): one of the
+    map's chunks, with its starts (:func:`piezo_fmu_harness.periodic.many.check_chunk`)."""
+    layout = chunks(spec.shape[0] * spec.shape[1])
+
+    def check(record: dict) -> None:
+        within(record["index"], len(layout), "chunk")
+        check_chunk(record, [(index, 0) for index in layout[record["index"]]])
+    return check
 
 
 def tasks(spec: BasinSpec) -> list:
