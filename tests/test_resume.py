@@ -165,3 +165,41 @@ def test_resume_in_an_empty_folder_runs_the_study_afresh(sweep, tmp_path):
     records = [json.loads(line) for line in (tmp_path / "points.jsonl").read_text().splitlines()]
     assert sorted(record["index"] for record in records) == [0, 1]
     assert (tmp_path / "sweep.nc").stat().st_size > 0
+
+
+# -- the chunked studies: each chunk checked against its own starts ----------------------------------
+
+def chunk(number: int, starts: list[tuple[int, int]], **more) -> dict:
+    """A chunk's record holding ``starts`` (``(index, group)``), each undecided."""
+    return {"index": number, "starts": [{"index": i, "group": g, "label": -1, "periods": 10} for i, g in starts],
+            "attractors": [], **more}
+
+
+def test_every_chunk_of_a_basin_map_is_checked_against_its_own_starts():
+    from piezo_fmu_harness.periodic.many import chunks
+    from piezo_fmu_harness.store import Damaged
+    from piezo_fmu_harness.studies.basins.study import BasinSpec, record_check
+
+    check = record_check(BasinSpec(1.2, 38.0, 1e-3, {}, (-1e-3, 1e-3, 33), (-0.1, 0.1, 33)))
+    layout = chunks(33 * 33)
+    assert len(layout) == 3
+    for number, indices in enumerate(layout):
+        check(chunk(number, [(i, 0) for i in indices]))
+    with pytest.raises(Damaged, match="chunk 1 holds other starts"):
+        check(chunk(1, [(i, 0) for i in layout[2]]))
+
+
+def test_every_chunk_of_a_fractions_study_is_checked_against_its_frequencies_and_starts():
+    from piezo_fmu_harness.store import Damaged
+    from piezo_fmu_harness.studies.fractions.study import FractionSpec, record_check
+
+    spec = FractionSpec((1.15, 1.175, 1.2), 31.6, (1e-3,) * 3, {"d": 8e-3}, 300, 8e-3, 0)
+    check = record_check(spec)
+    assert spec.chunks() == [[0, 1], [2]]
+    for number, frequencies in enumerate(spec.chunks()):
+        check(chunk(number, [(f * 300 + k, f) for f in frequencies for k in range(300)], frequencies=frequencies,
+                    cycles=1))
+    with pytest.raises(Damaged, match="frequencies"):
+        check(chunk(1, [(600 + k, 2) for k in range(300)], frequencies=[1], cycles=1))
+    with pytest.raises(Damaged, match="chunk 1 holds other starts"):
+        check(chunk(1, [(300 + k, 1) for k in range(300)], frequencies=[2], cycles=1))
