@@ -60,7 +60,7 @@ def values_of(basins: Path) -> dict:
 
 def label_of(basins: Path, summary: dict, index: int) -> dict:
     ds = open_dataset(basins / "basins.nc")
-    label = int(ds["attractor"].values.ravel()[index])
+    label = int(ds["basin"].values.ravel()[index])
     return next(a for a in summary["attractors"] if a["id"] == label)
 
 
@@ -88,8 +88,28 @@ def test_shares_add_to_one_and_the_two_impact_orbit_takes_more_than_nine_starts_
     linear = Y * float(linear_transmissibility(W, 1.0, 1000.0, 0.1))
     assert kinds["no impacts", 0.0]["amplitude"] == pytest.approx(linear, rel=1e-3)
     ds = open_dataset(basins / "basins.nc")
-    assert set(np.unique(ds["attractor"].values)) == set(range(ds.sizes["attractor"]))
+    assert set(np.unique(ds["basin"].values)) == set(ds["attractor"].values) == set(range(ds.sizes["attractor"]))
     assert (basins / "basins.png").stat().st_size > 0
+
+
+def test_basins_nc_selects_each_attractor_by_its_label_on_the_map(basins, summary):
+    """``basin`` maps each start to a label of the coordinate ``attractor``, so xarray selects an
+    attractor's row, and the map's names, by label; ``basins.csv`` gives the same labels."""
+    import pandas
+
+    ds = open_dataset(basins / "basins.nc")
+    assert ds["basin"].dims == ("p0", "dp0") and ds["attractor"].dims == ("attractor",)
+    for attractor in summary["attractors"]:
+        row = ds.sel(attractor=attractor["id"])
+        assert str(row["attractor_name"].values) == attractor["name"]
+        assert float(row["attractor_share"]) == attractor["share"]
+        assert int((ds["basin"] == attractor["id"]).sum()) == attractor["starts"]
+    names = ds["attractor_name"].sel(attractor=ds["basin"])
+    assert names.dims == ("p0", "dp0") and str(names.values[0, ISSUE_START]) == label_of(basins, summary,
+                                                                                          ISSUE_START)["name"]
+    table = pandas.read_csv(basins / "basins.csv")
+    assert list(table.columns) == ["p0", "dp0", "attractor", "periods", "attractor_name"]
+    assert (table["attractor"].values == ds["basin"].values.ravel()).all()
 
 
 def test_the_map_says_how_long_each_start_took_and_that_the_budget_left_none_undecided(basins, summary):

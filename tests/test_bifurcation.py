@@ -51,6 +51,17 @@ def test_each_point_has_its_section_samples_and_its_class(diagram):
     assert (diagram / "bifurcation.png").stat().st_size > 0
 
 
+def test_the_csv_gives_each_sample_with_one_ratio_column(diagram):
+    import pandas
+
+    table = pandas.read_csv(diagram / "bifurcation.csv")
+    assert list(table.columns) == ["direction", "omega", "sample", "p_section", "ratio", "impacts_per_cycle", "motion"]
+    ds = open_dataset(diagram / "bifurcation.nc")
+    assert len(table) == int(np.isfinite(ds["p_section"].values).sum())
+    expected = ds["ratio"].sel(omega=table["omega"].values, method="nearest").values
+    assert np.allclose(table["ratio"].values, expected, rtol=1e-15, atol=0)
+
+
 def test_the_summary_gives_the_work_of_the_sweeps_and_of_the_clouds(diagram):
     """``summary.json`` says where the start-periods went: a point on no orbit marched its own
     trajectory through the budget, and a cloud that persisted kept all its companions to the end."""

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..store import PointStore
+from ..store import Damaged, PointStore, require
 from .confirm import fmu_label
 
 #: Chunks a study's starts are split into (the batch engine is the faster a start the more starts
@@ -46,6 +46,32 @@ def chunks(count: int) -> list[list[int]]:
     """The start indices of each chunk."""
     size = chunk_size(count)
     return [list(range(begin, min(begin + size, count))) for begin in range(0, count, size)]
+
+
+def check_chunk(record: dict, starts: list[tuple[int, int]]) -> None:
+    """Raise :class:`~piezo_fmu_harness.store.Damaged` unless ``record`` is the chunk of this
+    study that holds ``starts`` (``(index, group)`` of each, in order; a group is a drive): its
+    starts with their labels and periods, and the attractors they reached."""
+    require(record, {"starts": list, "attractors": list})
+    groups = {group for _, group in starts}
+    for k, attractor in enumerate(record["attractors"]):
+        where = f"attractor {k}'s "
+        if not isinstance(attractor, dict):
+            raise Damaged(f"attractor {k} is not an object")
+        require(attractor, {"kind": str, "group": int}, where)
+        if attractor["group"] not in groups:
+            raise Damaged(f"{where}drive {attractor['group']} is not this chunk's: a record of another run")
+        if attractor["kind"] == "orbit":
+            require(attractor, {"order": int, "impacts": list, "sections": list}, where)
+    for k, start in enumerate(record["starts"]):
+        if not isinstance(start, dict):
+            raise Damaged(f"start {k} of the chunk is not an object")
+        require(start, {"index": int, "group": int, "label": int, "periods": int}, f"start {k}'s ")
+        if not -2 <= start["label"] < len(record["attractors"]):
+            raise Damaged(f"start {start['index']}'s label {start['label']} names no attractor of its chunk")
+    if [(start["index"], start["group"]) for start in record["starts"]] != starts:
+        raise Damaged(f"chunk {record['index']} holds other starts than this study's chunk {record['index']}: a "
+                      "record of another run")
 
 
 def backend_for(args, model, unzipdir: str, instance, jobs: int):

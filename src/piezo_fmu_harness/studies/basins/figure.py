@@ -19,7 +19,7 @@ def draw(ds, path: Path) -> Path:
     fig, (ax, right) = new_figure((11.0, 5.6), 1, 2)
     count = ds.sizes["attractor"]
     colors = [f"C{k % 10}" for k in range(count)]
-    ax.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, ds["attractor"].values, cmap=ListedColormap(colors),
+    ax.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, ds["basin"].values, cmap=ListedColormap(colors),
                   vmin=-0.5, vmax=count - 0.5, shading="nearest")
     for k in range(count):
         ax.plot([], [], "s", color=colors[k], ms=8,

@@ -17,8 +17,9 @@ periods each start took are the transient's length, mapped beside the basins. Th
 random sample of ``--confirm`` starts, are marched through the FMU, which must reach the attractor
 the map gives them (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
 
-Files: ``basins.nc`` (the attractor of each start on ``p0 x dp0``, the periods it took, the
-attractors with their shares and 95% intervals), ``basins.csv``, ``summary.json`` (the budget, the
+Files: ``basins.nc`` (``basin``: the attractor each start reaches, on ``p0 x dp0``, a label of
+the coordinate ``attractor``; the periods it took; the attractors with their shares and 95%
+intervals, over ``attractor``), ``basins.csv`` (a row a start), ``summary.json`` (the budget, the
 shares, what stayed undecided, the survival fit: the mean transient lifetime with its interval and
 the plateau, the boundary's uncertainty, the checks), ``basins.png`` (the map and the transient's
 length).
@@ -38,9 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from ...periodic.attractors import boundary, merge, shares
-from ...periodic.many import chunks
+from ...periodic.many import check_chunk, chunks
 from ...periodic.transients import counts, escape
-from ...store import open_folder
+from ...store import open_folder, within
 
 HEADER_FILE = "basins.json"
 #: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude,
@@ -107,7 +108,19 @@ def open_basins(model, spec: BasinSpec, folder: Path, resume: bool, force: bool)
     header = {**spec.to_dict(), "fmu_guid": model.guid}
     # the FMU's checks come after the chunks: a resumed map may ask for others
     same = tuple(k for k in header if k not in ("confirm", "seed"))
-    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "basin map")
+    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "basin map",
+                       check=record_check(spec))
+
+
+def record_check(spec: BasinSpec):
+    """The check of a recorded chunk (:func:`piezo_fmu_harness.store.open_folder`): one of the
+    map's chunks, with its starts (:func:`piezo_fmu_harness.periodic.many.check_chunk`)."""
+    layout = chunks(spec.shape[0] * spec.shape[1])
+
+    def check(record: dict) -> None:
+        within(record["index"], len(layout), "chunk")
+        check_chunk(record, [(index, 0) for index in layout[record["index"]]])
+    return check
 
 
 def tasks(spec: BasinSpec) -> list:
@@ -160,8 +173,8 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
     numbers = {name: np.array([row.get(name) if row.get(name) is not None else np.nan for row in rows], float)
                for name in ("share", "share_low", "share_high", "amplitude", "impacts_per_cycle", "max_multiplier")}
     ds = xr.Dataset(
-        {"attractor": (("p0", "dp0"), np.vectorize(relabel.get)(labels),
-                       {"long_name": "index of the motion each start reaches (attractor_name)"}),
+        {"basin": (("p0", "dp0"), np.vectorize(relabel.get)(labels),
+                   {"long_name": "the attractor each start reaches: its label on the coordinate attractor"}),
          "periods": (("p0", "dp0"), periods, {"units": "1", "long_name": "forcing periods marched until the motion "
                                                                          "was known"}),
          "attractor_name": (("attractor",), np.array(names, dtype=str), {}),
@@ -173,13 +186,14 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
          "max_multiplier": (("attractor",), numbers["max_multiplier"],
                             {"units": "1", "long_name": "largest Floquet multiplier (the neutral pair left out)"})},
         coords={"p0": ("p0", p0, {"units": "m", "long_name": "initial displacement of the main mass"}),
-                "dp0": ("dp0", dp0, {"units": "m/s", "long_name": "initial velocity of the main mass"})},
+                "dp0": ("dp0", dp0, {"units": "m/s", "long_name": "initial velocity of the main mass"}),
+                "attractor": ("attractor", np.arange(len(rows)), {"long_name": "attractor, by decreasing share"})},
         attrs={"title": "piezo-impact damper: basins of attraction", "ratio": spec.ratio, "omega_rad_per_s": spec.omega,
                "budget_periods": spec.max_cycles,
                "base_amplitude_m": spec.amplitude, "start": "q0 = p0, q0' = 0, base phase 0",
                "parameters": json.dumps(spec.values), "engine": "batch engine, checked through the FMU"})
     save_dataset(ds, folder / "basins.nc")
-    frame = ds.drop_dims("attractor").to_dataframe().reset_index()
+    frame = ds.drop_dims("attractor").to_dataframe().reset_index().rename(columns={"basin": "attractor"})
     frame["attractor_name"] = np.array(names)[frame["attractor"].values]
     frame.to_csv(folder / "basins.csv", index=False)
     verdicts = [c["verdict"] for c in checks]
@@ -192,7 +206,7 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
               "undecided": {"starts": undecided, "share": undecided / count},
               "transients": counts(fit),
               "attractors": [_summary_row(row, name, relabel) for row, name in zip(rows, names)],
-              "boundary": boundary(ds["attractor"].values),
+              "boundary": boundary(ds["basin"].values),
               "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
                              "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
                              "starts": [{**c, "study": relabel.get(c["study"]), "fmu": relabel.get(c["fmu"])}

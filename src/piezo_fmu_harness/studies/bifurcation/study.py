@@ -325,8 +325,8 @@ def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float, ch
     ds = build_dataset(spec, sweeps)
     save_dataset(ds, folder / "bifurcation.nc")
     frame = ds[["p_section"]].to_dataframe().dropna().reset_index()
-    frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),
-                on=["direction", "omega"]).to_csv(folder / "bifurcation.csv", index=False)
+    frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),  # ratio is omega's: one column
+                on=["direction", "omega", "ratio"]).to_csv(folder / "bifurcation.csv", index=False)
     report = summarize(ds, wall, checked, sweeps)
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     (folder / "points.json").write_text(json.dumps({"values": spec.values, "sweeps": sweeps}) + "\n")

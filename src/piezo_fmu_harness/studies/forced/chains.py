@@ -25,6 +25,7 @@ The harness reads nothing but the FMU: it never imports the simulation core.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +33,7 @@ from typing import Optional
 
 from ...fmu import FmuModel
 from ...periodic.band import FrequencySpec, rest_state, solve_point
-from ...store import PointStore, open_folder
+from ...store import Damaged, PointStore, numbers, open_folder, require, vector, within
 
 HEADER_FILE = "frequency_response.json"
 #: The four chains, in the order their first points are submitted (the costly ones first).
@@ -144,8 +145,29 @@ def open_frequency_run(model: FmuModel, spec: FrequencySpec, folder: Path, resum
     header = {**spec.to_dict(), "fmu": str(model.path), "fmu_guid": model.guid}
     same = tuple(k for k in header if k != "fmu")
     folder, done, start_over = open_folder(folder, HEADER_FILE, header, same, resume, force, "--out",
-                                           "frequency response")
+                                           "frequency response", check=record_check(spec))
     return FrequencyRun(spec, folder, done, header, start_over)
+
+
+def record_check(spec: FrequencySpec):
+    """The check of a recorded point (:func:`piezo_fmu_harness.store.open_folder`): one of the
+    study's points, at its frequency, with its status, its measures (numbers or null) and, when
+    it settled, the state and phase the next point of its chain starts from."""
+    count = len(spec.ratios)
+
+    def check(record: dict) -> None:
+        require(record, {"omega": float, "status": str})
+        within(record["index"], len(CHAINS) * count)
+        omega = float(spec.omegas[record["index"] % count])
+        if not math.isclose(record["omega"], omega, rel_tol=1e-12):
+            raise Damaged(f"point {record['index']} is at w = {record['omega']:.6g} rad/s, this study's at "
+                          f"{omega:.6g}: a record of another run")
+        numbers(record, [key for key in MEASURES if key != "unstable_orbits"])
+        require(record, {"unstable_orbits": (list, type(None)), "multipliers": (list, type(None))}, optional=True)
+        if record["status"] == "ok":
+            vector(record, "state", len(rest_state()))
+            require(record, {"phase": float})
+    return check
 
 
 def execute(run: FrequencyRun, backend, progress: Optional[bool] = None) -> None:

@@ -54,8 +54,8 @@ from pathlib import Path
 import numpy as np
 
 from ...periodic.attractors import merge, shares, track_names
-from ...periodic.many import chunk_size, confirm
-from ...store import open_folder
+from ...periodic.many import check_chunk, chunk_size, confirm
+from ...store import Damaged, open_folder, require, within
 
 HEADER_FILE = "fractions.json"
 #: The band's defaults: 61 frequencies over 0.5 to 2 sqrt(K/M), a budget of 6000 periods a start
@@ -134,7 +134,25 @@ def open_fractions(model, spec: FractionSpec, folder: Path, resume: bool, force:
     header = {**spec.to_dict(), "fmu_guid": model.guid}
     # the FMU's checks come after the chunks: a resumed study may ask for others
     same = tuple(k for k in header if k != "confirm")
-    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "fractions study")
+    return open_folder(folder, HEADER_FILE, header, same, resume, force, "--out", "fractions study",
+                       check=record_check(spec))
+
+
+def record_check(spec: FractionSpec):
+    """The check of a recorded chunk (:func:`piezo_fmu_harness.store.open_folder`): one of the
+    study's chunks, its frequencies and the starts at each of them
+    (:func:`piezo_fmu_harness.periodic.many.check_chunk`), and the periods it marched."""
+    layout = spec.chunks()
+
+    def check(record: dict) -> None:
+        within(record["index"], len(layout), "chunk")
+        require(record, {"frequencies": list, "cycles": int})
+        frequencies = layout[record["index"]]
+        if record["frequencies"] != frequencies:
+            raise Damaged(f"chunk {record['index']} is of the frequencies {record['frequencies']}, this study's of "
+                          f"{frequencies}: a record of another run")
+        check_chunk(record, [(f * spec.starts + k, f) for f in frequencies for k in range(spec.starts)])
+    return check
 
 
 def tasks(spec: FractionSpec) -> list:

@@ -2,6 +2,7 @@
 engine, with the perfectibility or the forced response as its objective (``piezo-fmu optimize``).
 
 - :mod:`.search`: the problem, the objective and the search;
+- :mod:`.log`: ``evaluations.jsonl``, and the check of its records on ``--resume``;
 - :mod:`.report`: the report, the sensitivity, the grid of the same budget and the figure;
 - :mod:`.command`: the command line.
 """

@@ -52,9 +52,9 @@ from ...fmu import FmuRunError, Instance
 from ...periodic.band import FrequencySpec
 from .band import sweep_band
 from ...store import PointStore, open_folder
+from .log import EVALUATIONS_FILE, record_check
 
 HEADER_FILE = "optimize.json"
-EVALUATIONS_FILE = "evaluations.jsonl"
 #: Each objective's terms: +1 for a term to be large (it enters J with a minus sign), -1 small.
 TERMS = {
     "perfectibility": {"DI": 1, "V_rms": 1},
@@ -192,6 +192,10 @@ class Optimizer:
     cache: dict = field(default_factory=dict)
     phase: str = "search"
 
+    def __post_init__(self) -> None:
+        # the next evaluation's index: after those recorded (a line deleted from the log leaves a gap)
+        self._next = max((record["index"] for record in self.cache.values()), default=-1) + 1
+
     def _key(self, x) -> tuple:
         return (self.phase if self.phase == "reference" else "design",) + tuple(repr(float(v)) for v in x)
 
@@ -207,7 +211,7 @@ class Optimizer:
             with PointStore(self.folder, EVALUATIONS_FILE) as store:
                 for _, record in self.backend.run_tasks(tasks):
                     record["phase"] = self.phase
-                    record["index"] = len(self.cache)
+                    record["index"], self._next = self._next, self._next + 1
                     self._score(record)
                     self.cache[self._key(record["x"])] = record
                     store.append(record)
@@ -332,7 +336,8 @@ def open_optimization(model, problem: Problem, references: dict, folder: Path, r
     header = {"problem": problem.to_dict(), "references_given": references, "search": settings,
               "fmu": str(model.path), "fmu_guid": model.guid}
     folder, done, start_over = open_folder(folder, HEADER_FILE, header, ("problem", "references_given", "search"),
-                                           resume, force, "--out", "optimisation", EVALUATIONS_FILE)
+                                           resume, force, "--out", "optimisation", EVALUATIONS_FILE,
+                                           record_check(problem))
     if start_over:
         PointStore(folder, EVALUATIONS_FILE).clear()
     (folder / HEADER_FILE).write_text(json.dumps(header, indent=2) + "\n")

@@ -25,9 +25,9 @@ from typing import Optional
 
 from ...datasets import save_dataset
 from ...drawing import Rendering
-from ...fmu import FmuModel
-from ...spec import SweepSpec, UsageError
-from ...store import SPEC_FILE, PointStore, open_folder
+from ...fmu import METRIC_OUTPUTS, OPTIONAL_METRICS, FmuModel
+from ...spec import SweepSpec
+from ...store import SPEC_FILE, Damaged, PointStore, numbers, open_folder, require, within
 from . import analysis, figures
 
 
@@ -67,15 +67,24 @@ def open_sweep(model: FmuModel, spec: SweepSpec, folder: Path, resume: bool, for
     """
     header = {**spec.to_dict(), "fmu": str(model.path), "fmu_guid": model.guid}
     folder, done, start_over = open_folder(folder, SPEC_FILE, header, ("axes", "fixed", "stop_time", "step"),
-                                           resume, force, option, "sweep")
-    store = PointStore(folder)
-    expected = dict(spec.points())
-    for index, record in done.items():
-        point = expected.get(index)
-        if point is None or any(record["values"].get(k) != v for k, v in point.items()):
-            raise UsageError(f"--resume: point {index} in {store.path} does not match the sweep; "
-                             "use --force to start over")
+                                           resume, force, option, "sweep", check=record_check(spec))
     return SweepRun(spec, folder, done, header, start_over)
+
+
+def record_check(spec: SweepSpec):
+    """The check of a recorded point (:func:`piezo_fmu_harness.store.open_folder`): one of this
+    sweep's points, at its values, with its status and metrics (numbers or null)."""
+    expected = dict(spec.points())
+
+    def check(record: dict) -> None:
+        require(record, {"values": dict, "status": str})
+        within(record["index"], spec.size)
+        point = expected[record["index"]]
+        if any(record["values"].get(k) != v for k, v in point.items()):
+            raise Damaged(f"point {record['index']} was run at {record['values']}, not at this sweep's {point}: a "
+                          "record of another run")
+        numbers(record, (*METRIC_OUTPUTS, *OPTIONAL_METRICS, "seconds", "cpu_seconds"))
+    return check
 
 
 def execute(runs: list[SweepRun], backend, progress: Optional[bool] = None) -> None:
