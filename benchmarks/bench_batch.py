@@ -13,7 +13,7 @@
    one that finds it in the cache (target below 5 s).
 3. **Agreement.** The ``K`` starts are taken to where they go on the kernel (the rule of
    ``piezo_fmu.solver.batch.attractors.settle``), and the FMU is marched from each until it shows which of
-   those attractors it reaches (``piezo_fmu_harness.periodic.confirm``): ``agree`` is true when no
+   those attractors it reaches (``piezo_fmu_harness.starts.destination``): ``agree`` is true when no
    FMU label differs from the kernel's while their trajectories were together.
 4. On a machine with an NVIDIA GPU and numba-cuda: the kernel on the GPU at 10,000 and 1,000,000
    starts, and how far its sections end from the CPU's.
@@ -47,7 +47,7 @@ from piezo_fmu import Parameters  # noqa: E402
 from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, describe, device_error, settle  # noqa: E402
 from piezo_fmu_harness import cli  # noqa: E402
 from piezo_fmu_harness.fmu import FmuModel, Instance, default_fmu_path, discard  # noqa: E402
-from piezo_fmu_harness.periodic.confirm import fmu_label  # noqa: E402
+from piezo_fmu_harness.starts.destination import fmu_label  # noqa: E402
 # the starts, the drive and the damper of both benchmarks, and the GPU's measures, written once in bench_gpu.py
 from bench_gpu import RATIO, VALUES, W_N, Y, starts, with_transfers  # noqa: E402
 from bench_gpu import agreement as gpu_agreement  # noqa: E402
@@ -120,9 +120,9 @@ def fmu_rate(instance: Instance, states: np.ndarray, omega: float, periods: int)
 def agreement(instance: Instance, states: np.ndarray, omega: float) -> dict:
     """Where the starts go on the batch engine, and where the FMU marched from them goes; a start
     whose FMU trajectory left the batch engine's before the batch engine's answer was known (a
-    chaotic transient: ``piezo_fmu_harness.periodic.confirm``) counts as parted, not as agreeing."""
+    chaotic transient: ``piezo_fmu_harness.starts.destination``) counts as parted, not as agreeing."""
     from piezo_fmu.solver.batch import tracks
-    from piezo_fmu_harness.periodic.attractors import merge
+    from piezo_fmu_harness.starts.attractors import merge
 
     params, drive = Parameters(**VALUES), HarmonicHold(omega, Y)
     settled = settle(params, drive, states, settings=SettleSettings())

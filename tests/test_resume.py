@@ -176,7 +176,7 @@ def chunk(number: int, starts: list[tuple[int, int]], **more) -> dict:
 
 
 def test_every_chunk_of_a_basin_map_is_checked_against_its_own_starts():
-    from piezo_fmu_harness.periodic.many import chunks
+    from piezo_fmu_harness.starts.chunks import chunks
     from piezo_fmu_harness.store import Damaged
     from piezo_fmu_harness.studies.basins.study import BasinSpec, record_check
 

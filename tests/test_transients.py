@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from piezo_fmu_harness.periodic.attractors import merge, verdict
-from piezo_fmu_harness.periodic.transients import PURE, REACH, escape, survival
+from piezo_fmu_harness.starts.attractors import merge, verdict
+from piezo_fmu_harness.starts.transients import PURE, REACH, escape, survival
 from piezo_fmu_harness.studies.bifurcation.study import CLOUD
 
 

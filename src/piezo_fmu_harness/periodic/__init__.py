@@ -8,6 +8,7 @@ frequency response, the continuation, the optimiser's forced objective):
 - :mod:`.stability`: the Floquet multipliers of an orbit;
 - :mod:`.attraction`: whether the trajectory goes to the orbit Newton found (the response is the
   motion a start's trajectory reaches);
+- :mod:`.motion`: what a motion that is not periodic is, from one window of it;
 - :mod:`.band`: a band of frequencies as the options ask for it, and one frequency's steady state as
   a task of the sweep engine.
 """

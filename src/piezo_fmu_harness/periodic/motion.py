@@ -24,7 +24,7 @@ A transient that contracts more slowly than 1% a period reads as quasi-periodic 
 exponent too, and one trajectory marched to a cap cannot show that its motion persists. The
 frequency response and the continuation's seeds report such a motion as :func:`undecided`, keeping
 the window's class beside it; the studies of many starts call a motion chaotic only once the
-survival of their starts shows that it persists (:mod:`piezo_fmu_harness.periodic.transients`).
+survival of their starts shows that it persists (:mod:`piezo_fmu_harness.starts.transients`).
 
 The harness reads nothing but the FMU: it never imports the simulation core.
 """

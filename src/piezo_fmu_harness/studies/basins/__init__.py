@@ -64,7 +64,8 @@ def command(args) -> int:
 
     from ...checks import PROG, device, engine_damper, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec, linear_transmissibility
-    from ...periodic.many import backend_for, confirm, execute
+    from ...starts.chunks import backend_for, execute
+    from ...starts.fmu_checks import confirm
     from . import study
 
     model = open_model(args)

@@ -8,14 +8,14 @@ engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (th
 sequence, the motion without impacts once it provably never reaches a barrier again, or, after
 the budget of ``--max-cycles`` periods, **undecided** (issue 31: a cap is a budget, not a
 verdict), unless the map's survival curve shows that what is left persists and the start's own
-exponent says chaotic or quasi-periodic (:func:`piezo_fmu_harness.periodic.attractors.merge`). The
+exponent says chaotic or quasi-periodic (:func:`piezo_fmu_harness.starts.attractors.merge`). The
 periods each start took are the transient's length, mapped beside the basins. The grid is split into chunks
-(:mod:`piezo_fmu_harness.periodic.many`), each a task of the sweep engine, appended to
+(:mod:`piezo_fmu_harness.starts.chunks`), each a task of the sweep engine, appended to
 ``points.jsonl`` as it finishes (``--resume`` runs the others).
 
 **The FMU checks the answer.** For every attractor the start that reached it soonest, and a seeded
 random sample of ``--confirm`` starts, are marched through the FMU, which must reach the attractor
-the map gives them (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
+the map gives them (:mod:`piezo_fmu_harness.starts.destination`); ``summary.json`` lists each check.
 
 Files: ``basins.nc`` (``basin``: the attractor each start reaches, on ``p0 x dp0``, a label of
 the coordinate ``attractor``; the periods it took; the attractors with their shares and 95%
@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...periodic.attractors import boundary, merge, shares
-from ...periodic.many import check_chunk, chunks
-from ...periodic.transients import counts, escape
+from ...starts.attractors import boundary, merge, shares
+from ...starts.chunks import check_chunk, chunks
+from ...starts.transients import counts, escape
 from ...store import open_folder, within
 
 HEADER_FILE = "basins.json"
@@ -114,7 +114,7 @@ def open_basins(model, spec: BasinSpec, folder: Path, resume: bool, force: bool)
 
 def record_check(spec: BasinSpec):
     """The check of a recorded chunk (:func:`piezo_fmu_harness.store.open_folder`): one of the
-    map's chunks, with its starts (:func:`piezo_fmu_harness.periodic.many.check_chunk`)."""
+    map's chunks, with its starts (:func:`piezo_fmu_harness.starts.chunks.check_chunk`)."""
     layout = chunks(spec.shape[0] * spec.shape[1])
 
     def check(record: dict) -> None:
@@ -135,7 +135,7 @@ def outcome(spec: BasinSpec, done: dict) -> tuple[list[dict], dict]:
 
 
 def payloads(spec: BasinSpec, found: list[dict], starts: dict):
-    """The maker of the FMU checks' payloads (:func:`piezo_fmu_harness.periodic.many.confirm`), each
+    """The maker of the FMU checks' payloads (:func:`piezo_fmu_harness.starts.fmu_checks.confirm`), each
     with the batch engine's sections of its start (its ``track``)."""
     grid = spec.starts()
     attractors = [{**a, "id": k} for k, a in enumerate(found)]

@@ -14,7 +14,7 @@ engine, a frequency a task, side by side (a progress bar follows them).
 the budget runs out may be on a long chaotic transient. So each such point is marched again with a
 cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
 (random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud is
-as large as the rule of :mod:`piezo_fmu_harness.periodic.transients` needs to show, from one budget
+as large as the rule of :mod:`piezo_fmu_harness.starts.transients` needs to show, from one budget
 with none escaping, that the motion would outlive a march as long again but for odds of 1 in 20.
 The chain goes on from the point's own trajectory, so the clouds are tasks of their own, run beside
 the chains on every worker. The point's motion is its own trajectory's: **periodic** once it
@@ -27,7 +27,7 @@ has one.
 
 **The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
 of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
-diagram gives (:mod:`piezo_fmu_harness.periodic.confirm`); ``summary.json`` lists each check.
+diagram gives (:mod:`piezo_fmu_harness.starts.destination`); ``summary.json`` lists each check.
 
 Files: ``bifurcation.nc`` (dims direction x omega x sample; the periods each point took and its
 cloud's lifetime), ``bifurcation.csv`` (a row a sample), ``points.json`` (the damper's values and each sweep's points: the
@@ -51,7 +51,7 @@ import numpy as np
 
 from ...datasets import bands
 from ...periodic.band import FrequencySpec
-from ...periodic.transients import NONE_SEEN, ONSET, REACH
+from ...starts.transients import NONE_SEEN, ONSET, REACH
 
 DIRECTIONS = ("up", "down")
 #: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), a budget of 1000 periods each.
@@ -155,8 +155,8 @@ def _drive(spec: dict, direction: str, number: int):
 def judged(point: dict, record: dict, clouded: dict) -> dict:
     """The point whose own trajectory reached no orbit, with its motion (the rule of the module's
     text): its cloud's survival fit, with the point's own record among the cloud's."""
-    from ...periodic.attractors import survival_fit, verdict
-    from ...periodic.transients import counts
+    from ...starts.attractors import survival_fit, verdict
+    from ...starts.transients import counts
 
     fit = survival_fit([record] + clouded["records"])
     motion = verdict(record, fit)
@@ -227,7 +227,7 @@ def checks(spec: FrequencySpec, sweeps: list[dict], backend, count: int, seed: i
     random (seeded), among the points whose start has the impact mass free (the FMU starts only so)."""
     from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
 
-    from ...periodic.many import confirm_task
+    from ...starts.fmu_checks import confirm_task
 
     points = [(j, k, p) for j, s in enumerate(sweeps) for k, p in enumerate(s["points"])
               if p["status"] == "ok" and p["start_side"] == 0.0]

@@ -50,7 +50,7 @@ def command(args) -> int:
 
     from ...checks import PROG, device, engine_damper, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec
-    from ...periodic.many import backend_for, execute
+    from ...starts.chunks import backend_for, execute
     from . import study
 
     model = open_model(args)

@@ -15,21 +15,21 @@ is where the question is open.
 
 **Names across the band.** The attractors of each frequency are matched to the previous
 frequency's by kind (order and impacts per cycle, or the class of a motion that is not periodic)
-and the nearest amplitude (:func:`piezo_fmu_harness.periodic.attractors.track_names`), so each
+and the nearest amplitude (:func:`piezo_fmu_harness.starts.attractors.track_names`), so each
 keeps one name across the band.
 
 The frequencies are grouped into chunks of the sweep engine, each chunk one batch, appended to
 ``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: at every frequency
 the start that reached each attractor soonest, and ``--confirm`` more drawn at random, are marched
-through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.periodic.confirm`).
+through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
 
 **A start ends where its trajectory ends** (issue 31). ``--max-cycles`` is a budget, not a
 verdict: a start not seen reaching an orbit within it is **undecided**, reported with its share,
 never folded into an attractor. At each frequency the survival curve of the starts (the share
-still unresolved after ``t`` periods) is fitted (:mod:`piezo_fmu_harness.periodic.transients`):
+still unresolved after ``t`` periods) is fitted (:mod:`piezo_fmu_harness.starts.transients`):
 the **mean transient lifetime** with its 95% interval, and the plateau. Undecided starts are called
 chaotic (or quasi-periodic) only where the plateau is shown and their own exponent says so
-(:func:`piezo_fmu_harness.periodic.attractors.verdict`).
+(:func:`piezo_fmu_harness.starts.attractors.verdict`).
 
 Files: ``fractions.nc`` (the fraction of each attractor over frequency, adding to 1 at every
 frequency, with its 95% interval; each attractor's amplitude and impacts per cycle; the undecided
@@ -53,8 +53,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...periodic.attractors import merge, shares, track_names
-from ...periodic.many import check_chunk, chunk_size, confirm
+from ...starts.attractors import merge, shares, track_names
+from ...starts.fmu_checks import confirm
+from ...starts.chunks import check_chunk, chunk_size
 from ...store import Damaged, open_folder, require, within
 
 HEADER_FILE = "fractions.json"
@@ -99,7 +100,7 @@ class FractionSpec:
         return np.stack([p0, self.span * self.natural * u[:, 1], p0 + half_gap * u[:, 2], np.zeros(self.starts)], axis=1)
 
     def chunks(self) -> list[list[int]]:
-        """The frequencies of each chunk (:func:`piezo_fmu_harness.periodic.many.chunk_size` starts
+        """The frequencies of each chunk (:func:`piezo_fmu_harness.starts.chunks.chunk_size` starts
         or a little more, whole frequencies)."""
         size = max(1, -(-chunk_size(self.starts * len(self.ratios)) // self.starts))
         return [list(range(k, min(k + size, len(self.ratios)))) for k in range(0, len(self.ratios), size)]
@@ -141,7 +142,7 @@ def open_fractions(model, spec: FractionSpec, folder: Path, resume: bool, force:
 def record_check(spec: FractionSpec):
     """The check of a recorded chunk (:func:`piezo_fmu_harness.store.open_folder`): one of the
     study's chunks, its frequencies and the starts at each of them
-    (:func:`piezo_fmu_harness.periodic.many.check_chunk`), and the periods it marched."""
+    (:func:`piezo_fmu_harness.starts.chunks.check_chunk`), and the periods it marched."""
     layout = spec.chunks()
 
     def check(record: dict) -> None:
@@ -165,7 +166,7 @@ def outcome(spec: FractionSpec, done: dict) -> tuple[list[dict], dict]:
 
 
 def checks(spec: FractionSpec, found: list[dict], starts: dict, backend) -> list[dict]:
-    """The FMU's checks, frequency by frequency (:func:`piezo_fmu_harness.periodic.many.confirm`):
+    """The FMU's checks, frequency by frequency (:func:`piezo_fmu_harness.starts.fmu_checks.confirm`):
     every attractor from one of its starts, and ``confirm`` random starts, each with the batch
     engine's sections of its start (its ``track``)."""
     from piezo_fmu.solver.batch import HarmonicHold, damper, tracks

@@ -1,6 +1,6 @@
 """The transients of a fractions study (issue 31): at each frequency, how long the starts took to
 reach their orbits, the share the budget left undecided, the mean transient lifetime with its 95%
-interval and the plateau (:func:`piezo_fmu_harness.periodic.transients.escape`), and the survival
+interval and the plateau (:func:`piezo_fmu_harness.starts.transients.escape`), and the survival
 curve; ``transients.png`` draws the lifetime over frequency and the survival curves of a few
 frequencies."""
 
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ...drawing import new_figure, save_png
-from ...periodic.attractors import wilson
-from ...periodic.transients import escape, survival
+from ...starts.attractors import wilson
+from ...starts.transients import escape, survival
 
 #: Points of the survival curve kept over the budget.
 CURVE_POINTS = 301

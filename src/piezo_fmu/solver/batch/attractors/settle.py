@@ -25,7 +25,7 @@ goes:
   section's spectrum are measured over ``classify_cycles`` more periods
   (:func:`.trajectories.statistics`). Whether the undecided starts of a drive **persist** (a
   chaotic or quasi-periodic attractor) is a question about all its starts, not one: their
-  survival curve, fitted by the caller (``piezo_fmu_harness.periodic.transients``) from the
+  survival curve, fitted by the caller (``piezo_fmu_harness.starts.transients``) from the
   periods at which the others were resolved.
 
 Everything runs on arrays of trajectories; the resolved ones leave the ensemble after each block.

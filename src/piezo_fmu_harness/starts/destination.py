@@ -38,9 +38,9 @@ import math
 
 import numpy as np
 
-from .drive import HarmonicDrive
+from ..periodic.drive import HarmonicDrive
+from ..periodic.motion import classify
 from .attractors import NOT_PERIODIC
-from .motion import classify
 
 #: Periods of the FMU's trajectory the rule looks at.
 WINDOW = 40

@@ -12,7 +12,7 @@ one list per drive (``group``):
 - the motion without impacts is one attractor per drive (the family where the impact mass rests);
 - the starts that reach no orbit within the budget of periods (issue 31) are **undecided**, never
   folded into an attractor, unless the drive's survival curve shows that what is left persists
-  (:func:`piezo_fmu_harness.periodic.transients.escape`: a plateau, the transient died out, the
+  (:func:`piezo_fmu_harness.starts.transients.escape`: a plateau, the transient died out, the
   curve flat at its end). Then a start is **chaotic** when its largest Lyapunov exponent is positive
   with a 95% interval that excludes 0, **quasi-periodic** when the interval holds 0 (or the exponent
   is within :data:`NEAR_ZERO` of it) and its section's spectrum is a few lines (line share at least
