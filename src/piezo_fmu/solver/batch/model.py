@@ -6,11 +6,15 @@ every phase is linear and unforced:
 
 - **Free flight.** ``u'' + 2 a u' + w_n^2 u = 0`` (``a = C / 2M``, ``w_n^2 = K / M``) and ``w'' = 0``:
   ``u(t) = e^{-a t} [c(t) u0 + s(t) (a u0 + u0')]``, ``u'(t) = e^{-a t} [c(t) u0' - s(t) (w_n^2 u0 + a u0')]``
-  with ``c = cos(w_d t)``, ``s = sin(w_d t) / w_d`` (underdamped; ``cosh`` and ``sinh`` overdamped,
-  the series at critical damping), and ``w = w0 + w0' t``. The impact mass's distance from a
-  barrier, ``g = +-(w - u) - d/2``, has ``|g''| = |u''| <= (w_n + 2a) sqrt(u'^2 + w_n^2 u^2)``, and
-  that root is non-increasing in free flight (``d/dt (u'^2 + w_n^2 u^2) = -4 a u'^2``): a bound that
-  holds from any instant on.
+  with ``c = cos(w_d t)``, ``s = sin(w_d t) / w_d`` (underdamped; ``cosh`` and ``sinh`` of ``b t``,
+  ``b = sqrt(a^2 - w_n^2)``, overdamped, the series at critical damping), and ``w = w0 + w0' t``.
+  Overdamped, ``e^{-a t} cosh(b t)`` and ``e^{-a t} sinh(b t) / b`` are taken as the two decays they
+  are, ``e^{-(a - b) t} (1 + e^{-2 b t}) / 2`` and ``e^{-(a - b) t} (1 - e^{-2 b t}) / 2b`` with
+  ``a - b = w_n^2 / (a + b)``: ``cosh`` alone would overflow once ``b t`` passes 710 (a main mass
+  damped heavily, or a hold step long against ``M / C``). The impact mass's distance from a barrier,
+  ``g = +-(w - u) - d/2``, has ``|g''| = |u''| <= (w_n + 2a) sqrt(u'^2 + w_n^2 u^2)``, and that root
+  is non-increasing in free flight (``d/dt (u'^2 + w_n^2 u^2) = -4 a u'^2``): a bound that holds
+  from any instant on.
 - **Contact with the barrier on side** ``s`` (+1 right, -1 left). At rest in contact the main spring
   is unstretched and the barrier undeflected, so the state relative to that rest,
   ``e = (u, w - s d/2, u', w'[, s V])`` (the patch voltage ``V`` only under ``voltage_model = 2``),
@@ -68,20 +72,19 @@ class FreeFlow:
         """``w_n + 2a`` (1/s): ``|u''| <= bound_rate * sqrt(u'^2 + w_n^2 u^2)``."""
         return math.sqrt(self.w2) + 2.0 * self.a
 
-    def _cs(self, t):
+    def coefficients(self, t) -> tuple:
+        """``(e^{-a t} c(t), e^{-a t} s(t))`` for the times ``t`` (s), to apply with :meth:`apply`."""
         beta2 = self.beta2
         if abs(beta2) <= 1e-12 * self.w2:  # critical damping, to rounding
             bt2 = beta2 * t * t
-            return 1.0 + bt2 / 2.0, t * (1.0 + bt2 / 6.0)
-        if beta2 < 0.0:
+            c, s = 1.0 + bt2 / 2.0, t * (1.0 + bt2 / 6.0)
+        elif beta2 < 0.0:
             wd = math.sqrt(-beta2)
-            return np.cos(wd * t), np.sin(wd * t) / wd
-        b = math.sqrt(beta2)
-        return np.cosh(b * t), np.sinh(b * t) / b
-
-    def coefficients(self, t) -> tuple:
-        """``(e^{-a t} c(t), e^{-a t} s(t))`` for the times ``t`` (s), to apply with :meth:`apply`."""
-        c, s = self._cs(t)
+            c, s = np.cos(wd * t), np.sin(wd * t) / wd
+        else:  # the slow and the fast decay apart (see the module's text)
+            b = math.sqrt(beta2)
+            slow, apart = np.exp(-self.w2 / (self.a + b) * t), -np.expm1(-2.0 * b * t)
+            return slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
         decay = np.exp(-self.a * t)
         return decay * c, decay * s
 
@@ -145,7 +148,8 @@ class BatchModel:
     K: float
     C: float
     coupled: bool
-    tau_e: float      # s, R C_p: the decay time of a patch's voltage between contacts
+    tau_e: float      # s, R C_p: the decay time of a patch's voltage between contacts (inf when its voltage
+    #                   does not act back, voltage_model 0 and 1: the engine carries none, and R C_p may be 0)
 
     @classmethod
     def of(cls, params: Parameters) -> "BatchModel":
@@ -153,4 +157,4 @@ class BatchModel:
         barrier = damper.barrier
         return cls(params, FreeFlow.of(params.M, params.K, params.C), ContactFlow.of(damper), params.d / 2.0,
                    params.M, damper.M_contact, params.m, barrier.M_eq, params.K, params.C, damper.coupled,
-                   params.R_load * barrier.C_p)
+                   params.R_load * barrier.C_p if damper.coupled else math.inf)

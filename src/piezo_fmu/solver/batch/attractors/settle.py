@@ -110,8 +110,8 @@ class Settled:
     were measured over; ``unstable``: orbits Newton found that are not stable (never a label);
     ``cycles``: start-periods marched in all; ``final`` and ``final_sides``: where each trajectory
     goes, at the section: the point of its orbit it was nearest when it got its label, the motion
-    without impacts with its impact mass where it rests, or, for an undecided start, its state
-    after the measuring window: where a sweep's next frequency starts.
+    without impacts with its impact mass where it rests, for an undecided start its state after the
+    measuring window, and for one set aside its start: where a sweep's next frequency starts.
     """
 
     labels: np.ndarray
@@ -229,8 +229,11 @@ class _State:
 
 
 def _destinations(state, final, final_sides, chosen, sections, scales) -> None:
-    """Where the labelled trajectories ``chosen`` (now at ``sections``) go (see :class:`Settled`)."""
+    """Where the labelled trajectories ``chosen`` (now at ``sections``) go (see :class:`Settled`); one
+    set aside keeps its start."""
     for j, x in zip(chosen, sections):
+        if state.labels[j] == SET_ASIDE:
+            continue
         attractor = state.attractors[state.labels[j]]
         if isinstance(attractor, Quiet):
             final[j] = [*attractor.orbit.nodes[0], x[2], 0.0]

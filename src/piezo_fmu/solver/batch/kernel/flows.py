@@ -18,9 +18,10 @@ def free_coefficients(c, t):
     elif mode == UNDERDAMPED:
         wd = c[WD]
         cos, sin = math.cos(wd * t), math.sin(wd * t) / wd
-    else:
+    else:  # the slow and the fast decay apart: cosh would overflow
         b = c[WD]
-        cos, sin = math.cosh(b * t), math.sinh(b * t) / b
+        slow, apart = math.exp(-c[W2] / (c[A] + b) * t), -math.expm1(-2.0 * b * t)
+        return slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
     decay = math.exp(-c[A] * t)
     return decay * cos, decay * sin
 

@@ -69,6 +69,8 @@ def round_end(start, x, event, v, h, progress, c, work):
             ec, es = free_coefficients(c, dt)
         u1, du1 = free_apply(c, ec, es, u, du)
         w1, dw1 = w + dw * dt, dw
+    elif dt == 0.0:  # a contact that ends as it starts: the state as it stands (the modes' sum rounds it)
+        u1, w1, du1, dw1, in_contact = u, w, du, dw, vr if side > 0.0 else vl
     else:
         u1, w1, du1, dw1, in_contact = contact_state(c, work, dt)
         w1 += side * hg

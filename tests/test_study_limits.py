@@ -1,0 +1,100 @@
+"""The batch engine at the edges of the FMU's ranges: dampers it marches as the scalar core does,
+where it crashed, overflowed or set every start aside."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from piezo_fmu import Parameters
+
+
+def follows_the_core(params, periods: int, count: int = 6) -> None:
+    """From random starts in the gap under a drive at 1.2 ``sqrt(K/M)``: every trajectory marched (none
+    set aside), with the scalar core's onsets in every period and its sections within 1e-9 m
+    (velocities over ``w``)."""
+    from test_batch import core_sections
+
+    from piezo_fmu.solver.batch import Ensemble, HarmonicHold
+    from piezo_fmu.solver.batch.attractors.orbits import scale_of
+
+    drive = HarmonicHold(1.2 * math.sqrt(params.K / params.M), 1e-3)
+    rng = np.random.default_rng(5)
+    p0 = rng.uniform(-params.d / 2, params.d / 2, count)
+    starts = np.column_stack([p0, rng.uniform(-1.0, 1.0, count) * drive.omega * 1e-3, p0, np.zeros(count)])
+    ensemble = Ensemble(params, drive, starts)
+    record = ensemble.advance(periods)
+    assert not ensemble.failed.any()
+    for k, start in enumerate(starts):
+        sections, onsets = core_sections(params, drive, start, periods)
+        assert record["impacts"][:, k].tolist() == onsets.tolist(), (params, k)
+        assert np.abs((record["sections"][:, k] - sections) * scale_of(drive)).max() < 1e-9, (params, k)
+    assert record["impacts"].sum() > 0
+
+
+@pytest.mark.parametrize("values", [{"m": 1e-30}, {"m": 1e14}, {"barrier_mode": 1, "K_eq": 1e-20},
+                                    {"barrier_mode": 1, "M_eq": 1e-300}])
+def test_dampers_at_the_edges_the_engine_takes_follow_the_core(values):
+    """An impact mass of no weight (its impacts give the barrier no momentum: a contact that ends as it
+    starts used to be marched on by the modes, whose rounding started it again until the trajectory was
+    set aside), one heavy enough for its slow modes to lie 1e-8 of the fast ones apart, nearly no
+    barrier, a barrier of no tip mass: with the scalar core over three periods."""
+    follows_the_core(Parameters(voltage_model=1, **values), 3)
+
+
+def test_a_heavily_damped_main_mass_flies_as_its_two_decays():
+    """``C / 2M`` times a hold step far past 710: ``e^{-a t} cosh(b t)`` overflowed (NaN, and every
+    start undecided); the two decays apart are the flow of free flight (its matrix's exponential at
+    30 digits) to 1e-12, in both codes (the source of the kernel run as Python), warning of nothing."""
+    import warnings
+
+    import mpmath as mp
+
+    from piezo_fmu.solver.batch import HarmonicHold, kernel
+    from piezo_fmu.solver.batch.kernel import flows
+    from piezo_fmu.solver.batch.model import BatchModel
+
+    params = Parameters(voltage_model=1, C=1e6)
+    model = BatchModel.of(params)
+    free = model.free
+    constants = kernel.Tables(model, [HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)]).constants
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for t in (1e-7, 1e-5, 2.6e-3, 1.0, 1e3):
+            flow = np.array(mp.expm(mp.matrix([[0, 1], [-free.w2, -2 * free.a]]) * t).tolist(), dtype=float)
+            ec, es = free.coefficients(np.array(t))
+            u, du = free.apply((ec, es), np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+            assert (np.abs(np.vstack([u, du]) - flow).max(axis=1) <= 1e-12 * np.abs(flow).max(axis=1)).all(), t
+            assert flows.free_coefficients(constants, t) == pytest.approx((float(ec), float(es)), rel=1e-14, abs=1e-300)
+
+
+def test_a_start_the_engine_sets_aside_keeps_its_start_where_others_reach_an_attractor():
+    """A trajectory whose march fails (a velocity of 1e300 m/s: its state leaves double range) is set
+    aside; its label indexed the attractors (an IndexError with one, another attractor's point with
+    two). Its destination is now its start, and the others are labelled as without it."""
+    from piezo_fmu.solver.batch import HarmonicHold, SettleSettings, settle
+
+    drive = HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)
+    starts = np.array([[0.0, 1e300, 0.0, 0.0], [-4.5e-3, -0.0739, -4.5e-3, 0.0], [1e-4, 0.0, 1e-4, 0.0]])
+    settings = SettleSettings(max_cycles=200, block=10, classify_cycles=40)
+    settled = settle(Parameters(voltage_model=1, R_load=3.59e6), drive, starts, settings=settings)
+    alone = settle(Parameters(voltage_model=1, R_load=3.59e6), drive, starts[1:], settings=settings)
+    assert settled.labels[0] == -2 and settled.final[0].tolist() == starts[0].tolist()
+    assert settled.labels[1:].tolist() == alone.labels.tolist() and len(alone.attractors) >= 1
+
+
+def test_a_circuit_that_does_not_act_back_needs_no_decay_time():
+    """Under ``voltage_model = 1`` the engine carries no voltage: a load whose ``R C_p`` is 0 in double
+    precision (5e-324 Ohm) gives the kernel's tables without a division by zero."""
+    import warnings
+
+    from piezo_fmu.solver.batch import HarmonicHold, kernel
+    from piezo_fmu.solver.batch.model import BatchModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = BatchModel.of(Parameters(voltage_model=1, R_load=5e-324))
+        tables = kernel.Tables(model, [HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)])
+    assert model.tau_e == math.inf and np.isfinite(tables.drive).all()
