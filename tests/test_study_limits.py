@@ -44,6 +44,18 @@ def test_dampers_at_the_edges_the_engine_takes_follow_the_core(values):
     follows_the_core(Parameters(voltage_model=1, **values), 3)
 
 
+def test_a_contact_its_modes_cannot_give_exactly_is_refused():
+    """Modes 2.5e-9 of the fastest apart (an impact mass of 1e16 kg: its slow pair lost in the rounding
+    of the fast one), and a barrier of 1e-30 N/m (its deflection scaled out of the balanced modes:
+    the modal sum departs from ``expm(B t)`` by the whole state) are refused with their reason."""
+    from piezo_fmu.solver.batch.model import BatchModel
+
+    with pytest.raises(ValueError, match=r"m = 1e\+16 kg.*closest modes 2.48e-09 of the fastest apart"):
+        BatchModel.of(Parameters(voltage_model=1, m=1e16))
+    with pytest.raises(ValueError, match=r"closed form 1 of the state off the flow"):
+        BatchModel.of(Parameters(voltage_model=1, barrier_mode=1, K_eq=1e-30))
+
+
 def test_a_heavily_damped_main_mass_flies_as_its_two_decays():
     """``C / 2M`` times a hold step far past 710: ``e^{-a t} cosh(b t)`` overflowed (NaN, and every
     start undecided); the two decays apart are the flow of free flight (its matrix's exponential at

@@ -27,7 +27,13 @@ every phase is linear and unforced:
   (no mode grows: the contact is passive). A mode no damping reaches (``C = C_eq = 0``, or ``C = 0``
   for the slow mode, which ``C_eq`` damps by a part in 1e16 or so) may come out of the
   diagonalisation with a real part of rounding's size, either sign; one that is positive, and within
-  :data:`ROUNDING` of the spectral radius, is taken as 0: the mode keeps its size.
+  :data:`ROUNDING` of the spectral radius, is taken as 0: the mode keeps its size. The modal form
+  is taken only where it is exact to about 1e-8 of the state (:data:`MAX_CONDITION`): eigenvectors
+  of condition below 1e8 (no two modes coinciding), no two modes nearer than 1e-8 of the fastest
+  (rounding of the fastest puts that much error into the slow ones: an impact mass of 1e16 kg), and
+  the form within :data:`MAX_DEPARTURE` of ``expm(B t)`` over ten radians of the fastest mode (a
+  component the balancing scales beyond rounding drops out of the modes: a barrier of 1e-30 N/m).
+  Anything else is refused (:mod:`.limits` finds the range of the values that moved it there).
 
 Both bounds make event location rigorous (:mod:`.kernel.location`): a step shorter than the bound
 allows cannot jump over a contact.
@@ -39,7 +45,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import matrix_balance
+from scipy.linalg import expm, matrix_balance
 
 from ...model.damper import Damper
 from ...model.dynamics import DU, DW, ONE, RIGHT, U, VOLT, W
@@ -47,8 +53,13 @@ from ...model.parameters import Parameters
 from ...model.rounding import EPS, NOISE_ULPS
 
 #: Condition number of the contact phase's (balanced) eigenvectors beyond which it counts as
-#: defective: the closed form would lose more than about 1e-8 of the state to rounding.
+#: defective: the closed form would lose more than about 1e-8 of the state to rounding. Its inverse
+#: bounds the modes' separation relative to the fastest, and the form's departure from the flow.
 MAX_CONDITION = 1e8
+#: How far the modal form may depart from the flow ``expm(B t)``, relative to the state: its rounding
+#: stays near 1e-8 where the modes are at least ``1 / MAX_CONDITION`` apart; beyond this bound a
+#: component of the state has dropped out of the modes (a barrier of 1e-29 N/m: a departure of 1).
+MAX_DEPARTURE = 1e-6
 #: The largest positive real part of a contact mode taken as 0, relative to the spectral radius: the
 #: rounding level of an event function (an undamped mode comes out of ``eig`` within about 1 ulp).
 ROUNDING = NOISE_ULPS * EPS
@@ -112,24 +123,74 @@ class ContactFlow:
         B = A[np.ix_(keep, keep)]
         rest = np.zeros(A.shape[0])
         rest[W], rest[ONE] = damper.params.d / 2.0, 1.0
-        if np.any(np.abs(A @ rest) > 1e-12 * np.abs(A).max() * rest.sum()):
-            raise AssertionError("contact: the rest state is not u = 0, w = d/2 (the model changed?)")
-        _, (scale, _) = matrix_balance(B, permute=False, separate=True)
-        lam, P = np.linalg.eig((B * scale[None, :]) / scale[:, None])  # T^-1 B T, T = diag(scale)
-        condition = float(np.linalg.cond(P))
+        with np.errstate(all="ignore"):  # a contact beyond double range is refused below
+            if np.any(np.abs(A @ rest) > 1e-12 * np.abs(A).max() * rest.sum()):
+                raise AssertionError("contact: the rest state is not u = 0, w = d/2 (the model changed?)")
+            lam, P, scale = _balanced_modes(B)
+            condition = float(np.linalg.cond(P)) if np.isfinite(P).all() else math.inf
+            apart = _separation(lam)
+            modes = np.where(lam.real > 0.0, 1j * lam.imag, lam)
+            Q = P * scale[:, None]
+            Q_inv = np.linalg.inv(P) / scale[None, :] if condition < math.inf else P
+            departure = _departure(B, modes, Q, Q_inv)
         params = damper.params
-        if not condition < MAX_CONDITION or not np.all(lam.real <= ROUNDING * np.abs(lam).max()):
+        if not (condition < MAX_CONDITION and apart * MAX_CONDITION >= 1.0 and departure <= MAX_DEPARTURE
+                and np.all(lam.real <= ROUNDING * np.abs(lam).max())):
             raise ValueError(f"C_eq = {params.C_eq!r} N.s/m, m = {params.m!r} kg, M = {params.M!r} kg, "
-                             f"C = {params.C!r} N.s/m: the contact phase is defective or grows (eigenvector "
-                             f"condition {condition:.3g}, eigenvalues {np.round(lam, 6).tolist()}); the batch "
-                             f"engine's closed form needs distinct modes, none growing (allowed: condition below "
-                             f"{MAX_CONDITION:g}); the scalar core and the FMUs take this damper")
-        lam = np.where(lam.real > 0.0, 1j * lam.imag, lam)
-        Q = P * scale[:, None]
-        Q_inv = np.linalg.inv(P) / scale[None, :]
+                             f"C = {params.C!r} N.s/m (and the barrier's K_eq, M_eq): the contact phase is "
+                             f"defective, inexact or grows (eigenvector condition {condition:.3g}, its closest "
+                             f"modes {apart:.3g} of the fastest apart, its closed form {departure:.3g} of the state "
+                             f"off the flow, eigenvalues {np.round(lam, 6).tolist()}); the batch engine's closed "
+                             f"form needs distinct modes, none growing (allowed: condition below "
+                             f"{MAX_CONDITION:g}, modes at least {1.0 / MAX_CONDITION:g} of the fastest apart, the "
+                             f"flow within {MAX_DEPARTURE:g} of the state); the scalar core and the FMUs take this "
+                             "damper")
         row = np.zeros(len(keep))
         row[0], row[1] = -1.0, 1.0
-        return cls(lam, Q, Q_inv, row @ Q, len(keep))
+        return cls(modes, Q, Q_inv, row @ Q, len(keep))
+
+
+def _balanced_modes(B: np.ndarray) -> tuple:
+    """``(lam, P, scale)``: the eigenvalues and eigenvectors of ``B`` balanced by ``T = diag(scale)``
+    (``T^-1 B T = P diag(lam) P^-1``); NaN where ``B``, or its balancing, leaves double range."""
+    nan = (np.full(len(B), np.nan + 0j), np.full(B.shape, np.nan + 0j), np.ones(len(B)))
+    if not np.isfinite(B).all():
+        return nan
+    _, (scale, _) = matrix_balance(B, permute=False, separate=True)
+    balanced = (B * scale[None, :]) / scale[:, None]
+    if not (np.isfinite(balanced).all() and np.isfinite(scale).all()):
+        return nan
+    lam, P = np.linalg.eig(balanced)
+    return lam, P, scale
+
+
+def _departure(B: np.ndarray, lam: np.ndarray, Q: np.ndarray, Q_inv: np.ndarray) -> float:
+    """How far the modal form ``Q diag(exp(lam t)) Q^-1`` lies from the flow ``expm(B t)`` after one
+    and ten radians of the fastest mode, relative to the state (NaN for NaN modes): positions in
+    metres, velocities in metres a radian of the fastest mode, the voltage in the deflection that
+    makes it. Balancing makes the modes' eigenvectors accurate in its own units; where it must scale
+    one of the state's components by a factor beyond rounding (a barrier of no stiffness: 1e-100
+    N/m), that component is lost from the modes, and the closed form leaves the flow."""
+    fastest = float(np.abs(lam).max())
+    if not np.isfinite(Q_inv).all() or not math.isfinite(fastest) or fastest == 0.0:
+        return math.nan
+    units = np.array([1.0, 1.0, fastest, fastest, abs(B[-1, 3]) or 1.0])[:len(B)]
+    worst = 0.0
+    for t in (1.0 / fastest, 10.0 / fastest):
+        flow = expm(B * t)
+        modal = ((Q * np.exp(lam * t)[None, :]) @ Q_inv).real
+        scaled = lambda F: F * units[None, :] / units[:, None]  # noqa: E731  D^-1 F D
+        worst = max(worst, float(np.abs(scaled(modal - flow)).max() / max(1.0, np.abs(scaled(flow)).max())))
+    return worst
+
+
+def _separation(lam: np.ndarray) -> float:
+    """The distance between the two closest of the modes ``lam``, relative to the fastest (NaN for
+    NaN modes): the eigenvalues are found within rounding of the fastest (``EPS |lam|_max``), so two
+    modes nearer than ``1 / MAX_CONDITION`` of it have eigenvectors and rates correct to no more than
+    about 1e-8 (a slow pair against a fast one: an impact mass of 1e12 kg on a barrier's tip of 4 g)."""
+    gaps = np.abs(lam[:, None] - lam[None, :]) + np.diag(np.full(len(lam), np.inf))
+    return float(gaps.min() / np.abs(lam).max())
 
 
 @dataclass(frozen=True, eq=False)
