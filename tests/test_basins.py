@@ -177,11 +177,34 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
     (["--ratio", "1", "--set", "C=0"], ["C = 0.0 N.s/m", "w/w_n = 1 ", "no bounded response", "allowed: C >= 3.16e-11 N.s/m"]),
     (["--ratio", "1.2", "--set", "m=0.3", "--set", f"C_eq={DEFECTIVE_C_EQ!r}"],
      ["C_eq = 242.3", "defective", "the scalar core and the FMUs take this damper", "move C_eq or R_load by a part in a million"]),
+    # a main mass of 1e30 kg (its contact's slow modes merged with the fast ones by rounding), a
+    # spring of 1e-20 N/m (hold steps longer than the FMU takes)
+    (["--ratio", "1.2", "--set", "M=1e30"], ["M = 1e+30 kg", "closest modes 8.08e-17 of the fastest apart",
+                                             "the batch studies take M <= 6.59e+13 kg (allowed range"]),
+    (["--ratio", "1.2", "--set", "K=1e-20"], ["K = 1e-20 N/m", "at most 1e+07 brackets", "is 8.18e+08 s",
+                                              "too slow for the FMU", "the batch studies take K >= 1.68e-19 N/m"]),
+    # a heavy impact mass, and a barrier whose deflection drops out of the modes
+    (["--ratio", "1.2", "--set", "m=1e20"], ["m = 1e+20 kg", "the batch studies take m <= 6.12e+14 kg"]),
+    (["--ratio", "1.2", "--set", "barrier_mode=1", "--set", "K_eq=1e-30"],
+     ["K_eq = 1e-30 N/m", "closed form 1 of the state off the flow", "the batch studies take K_eq >= 1.96e-29 N/m"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"
     assert_refused(capsys, "basins", argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "points.jsonl").exists()
+
+
+def test_an_impact_mass_of_no_weight_is_marched_and_the_fmu_agrees(tmp_path, capsys):
+    """An impact mass of 1e-30 kg: its impacts give the barrier no momentum, and a contact that ends
+    as it starts was marched on by the engine's modes, whose rounding started it again (the starts
+    set aside, then an IndexError); now every start is marched, and the FMU agrees."""
+    assert run_cli("basins", "--ratio", 1.2, "--grid", 5, "--set", "m=1e-30", "--confirm", 1, "--jobs", 1,
+                   "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    kinds = sorted(a["kind"] for a in summary["attractors"])
+    assert kinds == ["no impacts", "orbit"], kinds  # both motions of the nominal damper, none set aside
+    checks = summary["fmu_checks"]
+    assert checks["checked"] >= 2 and checks["agree"] == checks["checked"]
 
 
 def test_a_process_that_ran_another_study_first_finds_the_batch_engine(tmp_path):

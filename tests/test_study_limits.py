@@ -1,14 +1,21 @@
-"""The batch engine at the edges of the FMU's ranges: dampers it marches as the scalar core does,
-where it crashed, overflowed or set every start aside."""
+"""The batch studies at the edges of the FMU's ranges: a damper the FMU accepts is marched by the
+batch engine, with the FMU agreeing, or refused before any work with the parameter, its value, the
+range the studies take and why (``piezo_fmu.solver.batch.limits``); never a traceback, a signal or
+a numpy warning."""
 
 from __future__ import annotations
 
 import math
+import re
+import sys
 
 import numpy as np
 import pytest
+from fmu_host import ROOT
 
 from piezo_fmu import Parameters
+from piezo_fmu.solver.batch import study_error
+from piezo_fmu.solver.batch.limits import FMU_BRACKETS_PER_STEP
 
 
 def follows_the_core(params, periods: int, count: int = 6) -> None:
@@ -110,3 +117,42 @@ def test_a_circuit_that_does_not_act_back_needs_no_decay_time():
         model = BatchModel.of(Parameters(voltage_model=1, R_load=5e-324))
         tables = kernel.Tables(model, [HarmonicHold(1.2 * math.sqrt(1000.0), 1e-3)])
     assert model.tau_e == math.inf and np.isfinite(tables.drive).all()
+
+
+@pytest.mark.parametrize("name, value, side", [("M", 1e30, "<="), ("K", 1e-20, ">="), ("m", sys.float_info.max, "<=")])
+def test_a_refusal_states_the_range_the_studies_take_and_its_bound_holds(name, value, side):
+    """A main mass of 1e30 kg and the heaviest impact mass (their contact's slow modes merged with the
+    fast ones by rounding), a spring of 1e-20 N/m (hold steps longer than the FMU takes): the refusal
+    names the value and the bound; the studies take the bound itself, and refuse a value a part in
+    a hundred beyond it."""
+    values = {"voltage_model": 1, name: value}
+    message = study_error(values, [1.2], 64)
+    assert f"{name} = {value!r}" in message and "allowed range" in message, message
+    bound = float(re.search(rf"take {name} {side} (\S+)", message).group(1))
+    beyond = bound * (1.01 if side == "<=" else 0.99)
+    assert study_error({**values, name: bound}, [1.2], 64) is None
+    assert study_error({**values, name: beyond}, [1.2], 64) is not None
+
+
+def test_beyond_the_bound_of_a_slow_main_mass_the_fmu_refuses_the_studies_hold_step():
+    """The studies' limit is the FMU's: a spring a part in a hundred softer than the bound the
+    studies state makes a hold step the FMU refuses at its first step, with the studies' longest
+    bracket and the same number of brackets allowed."""
+    from piezo_fmu.fmi.cosim import MAX_BRACKETS_PER_STEP
+    from piezo_fmu_harness.fmu import FmuModel, FmuRunError, Instance, discard
+
+    assert FMU_BRACKETS_PER_STEP == MAX_BRACKETS_PER_STEP
+    message = study_error({"voltage_model": 1, "K": 1e-20}, [1.2], 64)
+    bound = float(re.search(r"take K >= (\S+)", message).group(1))
+    longest = re.search(r"\((\S+) s each here\)", message).group(1)
+    K = 0.99 * bound
+    step = 2.0 * math.pi / (1.2 * math.sqrt(K) * 64)
+    model = FmuModel(ROOT / "fmus" / "PiezoImpactDamper.fmu")
+    folder = model.extract()
+    instance = Instance(model, folder)
+    try:
+        with pytest.raises(FmuRunError, match=rf"the longest is {re.escape(longest)} s\); at most 1e\+07 are allowed"):
+            instance.run({"K": K, "voltage_model": 1}, stop_time=step, step=step)
+    finally:
+        instance.free()
+        discard(folder)

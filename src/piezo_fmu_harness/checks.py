@@ -89,16 +89,19 @@ def load_value(model, value: float, option: str) -> float:
         raise UsageError(f"{option} {value:g}: {error}") from None
 
 
-def engine_damper(values: dict, why_not) -> None:
-    """The damper ``values`` (the FMU's defaults and ``--set``), refused before any work when
-    ``why_not(values)`` (the batch engine's own test: the modes of its contact must be distinct and
-    none may grow; None, from an FMU whose engine has no such test) says why the engine cannot take it.
-    A passive contact never grows, so what it refuses is a contact whose modes coincide (to some
-    1e-8): damped critically, or with a circuit as fast as one of its modes."""
-    message = why_not(values) if why_not is not None else None
+def engine_damper(values: dict, batch, ratios, samples: int) -> None:
+    """The damper ``values`` (the FMU's defaults and ``--set``) forced at the study's frequencies
+    ``ratios`` (``w / sqrt(K/M)``) with ``samples`` hold steps a period, refused before any work when the batch
+    engine ``batch`` (the FMU's copy) says why the studies cannot take it: its contact's modes are
+    not distinct to its closed form (two coincide, or their time scales lie too far apart), or the
+    FMU that checks the studies would refuse their hold steps. An older engine tests the contact
+    alone (``damper_error``), or nothing."""
+    if hasattr(batch, "study_error"):
+        message = batch.study_error(values, [float(r) for r in ratios], samples)
+    else:
+        message = batch.damper_error(values) if hasattr(batch, "damper_error") else None
     if message:
-        raise UsageError(f"--set: {message}; two of the contact's modes coincide (a contact damped "
-                         "critically, or a circuit as fast as a mode): move C_eq or R_load by a part in a million")
+        raise UsageError(f"--set: {message}")
 
 
 def worker_count(args) -> int:

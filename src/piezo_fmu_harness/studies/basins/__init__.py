@@ -95,7 +95,7 @@ def command(args) -> int:
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
-        engine_damper(spec.values, getattr(batch, "damper_error", None))
+        engine_damper(spec.values, batch, [ratio], settings.samples)
         folder, done, start_over = study.open_basins(model, spec, args.out, args.resume, args.force)
         backend = backend_for(args, model, unzipdir, instance, jobs)
         begin = time.perf_counter()

@@ -55,7 +55,7 @@ def command(args) -> int:
         device(args.device, device_error)
         args.newton_iterations = None
         spec = frequency_spec(args, model, instance, study.DEFAULTS)
-        engine_damper(spec.values, getattr(batch, "damper_error", None))
+        engine_damper(spec.values, batch, spec.ratios, spec.settings.samples)
         folder = Path(args.out)
         if (folder / "bifurcation.nc").exists() and not args.force:
             raise UsageError(f"--out {folder}: holds a bifurcation diagram already; give --force to replace it")

@@ -69,7 +69,7 @@ def command(args) -> int:
         args.newton_iterations = None
         band = frequency_spec(args, model, instance, study.DEFAULTS)
         parameters = {**model.defaults(), **band.values}
-        engine_damper(parameters, getattr(batch, "damper_error", None))
+        engine_damper(parameters, batch, band.ratios, band.settings.samples)
         span = positive(parameters["d"] if args.span is None else args.span, "--span",
                         "the half-width of the starts' p0", "m")
         settings = band.settings
