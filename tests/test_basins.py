@@ -187,6 +187,8 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
     (["--ratio", "1.2", "--set", "m=1e20"], ["m = 1e+20 kg", "the batch studies take m <= 6.12e+14 kg"]),
     (["--ratio", "1.2", "--set", "barrier_mode=1", "--set", "K_eq=1e-30"],
      ["K_eq = 1e-30 N/m", "closed form 1 of the state off the flow", "the batch studies take K_eq >= 1.96e-29 N/m"]),
+    (["--ratio", "1.2", "--set", "L_p=5e-324"],
+     ["--load: the default load", "L_p = 5e-324", "allowed range (0, inf) Ohm"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

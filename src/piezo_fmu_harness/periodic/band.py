@@ -105,9 +105,14 @@ UNBOUNDED = 1e12
 
 
 def linear_transmissibility(omega, M: float, K: float, C: float):
-    """``|X/Y|`` of the base-excited oscillator (absolute displacement over base amplitude)."""
+    """``|X/Y|`` of the base-excited oscillator (absolute displacement over base amplitude), from the
+    frequency ratio ``r = w / sqrt(K/M)`` and ``2 zeta r = C w / K``, so that no square leaves double
+    range (a spring of 1e-300 N/m: ``K^2`` is 0)."""
     omega = np.asarray(omega, float)
-    return np.sqrt((K**2 + (C * omega) ** 2) / ((K - M * omega**2) ** 2 + (C * omega) ** 2))
+    natural = math.sqrt(K / M)
+    ratio = omega / natural if natural > 0.0 else np.zeros_like(omega)  # sqrt(K/M) is 0: so is every w
+    damping = C * omega / K
+    return np.hypot(1.0, damping) / np.hypot(1.0 - ratio * ratio, damping)
 
 
 def solve_point(instance: Instance, index: int, values: dict, omega: float, amplitude: float,
@@ -149,7 +154,7 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the
     band's (:data:`piezo_fmu_harness.periodic.band.BAND_DEFAULTS` unless given)."""
     from ..checks import assignments, load_value, positive, whole
-    from ..circuit import circuit_constants
+    from ..circuit import default_load
     from ..spec import UsageError, check_with_fmu
 
     defaults = defaults or BAND_DEFAULTS
@@ -198,12 +203,15 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     values = {**overrides, "voltage_model": voltage_model}
     if args.load is not None:
         values["R_load"] = load_value(model, args.load, "--load")
-    else:
-        check_with_fmu(model, instance, [values], "--set")
-        values["R_load"] = float(f"{circuit_constants(instance, values)['R_opt_estimate_ohm']:.6g}")
+    check_with_fmu(model, instance, [values], "--set")  # before anything is derived from the values
+    if args.load is None:
+        values["R_load"] = default_load(instance, values)
     checked = {name: value for name, value in values.items() if name not in searched}
     parameters = {**model.defaults(), **values}
     natural = math.sqrt(parameters["K"] / parameters["M"])
+    if not natural > 0.0:
+        raise UsageError(f"--set K = {parameters['K']!r} N/m, M = {parameters['M']!r} kg: sqrt(K/M) is 0 rad/s in "
+                         "double precision, and the studies force at multiples of it; allowed: K/M >= 5e-324 1/s^2")
     ratios = tuple(float(f"{r:.12g}") for r in (np.linspace(lo, hi, count) if count > 1 else [lo]))
     peak_y = amplitude if amplitude is not None else acceleration / (lo * natural) ** 2
     with np.errstate(divide="ignore"):
