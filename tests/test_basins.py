@@ -189,6 +189,11 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
      ["K_eq = 1e-30 N/m", "closed form 1 of the state off the flow", "the batch studies take K_eq >= 1.96e-29 N/m"]),
     (["--ratio", "1.2", "--set", "L_p=5e-324"],
      ["--load: the default load", "L_p = 5e-324", "allowed range (0, inf) Ohm"]),
+    # what the FMU refuses itself, with a range: a beam or a damping beyond double range
+    (["--ratio", "1.2", "--set", "t_b=1.7976931348623157e+308"], ["the FMU rejects", "t_b = 1.7976931348623157e+308 m",
+                                                                   "leave double range", "allowed range"]),
+    (["--ratio", "1.2", "--set", "C=1.7976931348623157e+308"], ["the FMU rejects", "C = 1.7976931348623157e+308 N.s/m",
+                                                                 "allowed range: at least 1e-09 s"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

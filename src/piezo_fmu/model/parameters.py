@@ -138,7 +138,14 @@ class Parameters:
                 f"q0 = {self.q0!r} m starts the impact mass outside the gap: |q0 - p0| must be <= d/2, "
                 f"so the allowed range of q0 is [{self.p0 - self.d / 2:g}, {self.p0 + self.d / 2:g}] m")
         # M_eq is part of M (docs/model.md section 3), so M must exceed it; checked here for both modes.
-        barrier = derive_barrier(self)
+        try:
+            barrier = derive_barrier(self)
+        except (OverflowError, ZeroDivisionError) as error:  # a power beyond double range, or 0 / 0
+            moved = ", ".join(f"{name} = {getattr(self, name)!r} {_unit(name)}" for name in GEOMETRY
+                              if getattr(self, name) != _default(name)) or "the geometry"
+            raise ValueError(f"{moved}: the barrier's equivalents leave double range ({error}); allowed range: a "
+                             "beam and patch whose stiffnesses E W t^3 / 12 and masses lie within (5e-324, "
+                             "1.8e308)") from None
         m_eq = barrier.M_eq
         if self.M <= m_eq:
             raise ValueError(
@@ -164,6 +171,18 @@ class Parameters:
     def as_dict(self) -> dict:
         """All values by name (SI), JSON-safe."""
         return dataclasses.asdict(self)
+
+
+#: The beam's and the patch's values, from which the barrier's equivalents are derived.
+GEOMETRY = ("E_b", "L", "t_b", "W_b", "rho_b", "x1", "E_p", "L_p", "t_p", "W_p", "rho_p", "g31", "d31", "eps33")
+
+
+def _unit(name: str) -> str:
+    return parameter_info()[name]["unit"]
+
+
+def _default(name: str) -> float:
+    return parameter_info()[name]["default"]
 
 
 def parameter_info() -> dict[str, dict]:

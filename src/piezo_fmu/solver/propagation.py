@@ -57,8 +57,8 @@ class LinearPhase:
 
     def __init__(self, A: np.ndarray, rho: float | None = None):
         self.A = np.asarray(A, dtype=float)
-        if rho is None:
-            rho = float(np.max(np.abs(np.linalg.eigvals(self.A))))
+        if rho is None:  # a matrix beyond double range turns at once: the integrator refuses it
+            rho = float(np.max(np.abs(np.linalg.eigvals(self.A)))) if np.isfinite(self.A).all() else math.inf
         #: s, the longest bracket: each mode turns by at most THETA rad within it, and no longer
         #: than MAX_BRACKET, so that ``tau**ORDER`` stays finite for a phase that barely moves.
         self.h = THETA / rho if rho > THETA / MAX_BRACKET else MAX_BRACKET
