@@ -194,6 +194,10 @@ def test_an_interrupted_map_resumes_to_the_same_attractors(basins, summary, tmp_
                                                                    "leave double range", "allowed range"]),
     (["--ratio", "1.2", "--set", "C=1.7976931348623157e+308"], ["the FMU rejects", "C = 1.7976931348623157e+308 N.s/m",
                                                                  "allowed range: at least 1e-09 s"]),
+    (["--ratio", "1.2", "--voltage-model", "2", "--set", "L_p=5e-324"],
+     ["the FMU rejects", "L_p = 5e-324 m", "the coupled circuit's stiffness", "allowed range"]),
+    (["--ratio", "1.2", "--voltage-model", "2", "--load", "5e-324"],
+     ["R_load = 5e-324 Ohm is too small", "1/(R_load C_p) = inf 1/s", "allowed range [351.727, inf) Ohm"]),
 ])
 def test_bad_basin_input_is_refused_with_exit_status_2(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

@@ -140,12 +140,8 @@ class Parameters:
         # M_eq is part of M (docs/model.md section 3), so M must exceed it; checked here for both modes.
         try:
             barrier = derive_barrier(self)
-        except (OverflowError, ZeroDivisionError) as error:  # a power beyond double range, or 0 / 0
-            moved = ", ".join(f"{name} = {getattr(self, name)!r} {_unit(name)}" for name in GEOMETRY
-                              if getattr(self, name) != _default(name)) or "the geometry"
-            raise ValueError(f"{moved}: the barrier's equivalents leave double range ({error}); allowed range: a "
-                             "beam and patch whose stiffnesses E W t^3 / 12 and masses lie within (5e-324, "
-                             "1.8e308)") from None
+        except (OverflowError, ZeroDivisionError) as error:  # a power beyond double range, or x / 0
+            raise self._beyond_double_range("the barrier's equivalents leave", error) from None
         m_eq = barrier.M_eq
         if self.M <= m_eq:
             raise ValueError(
@@ -154,15 +150,29 @@ class Parameters:
         if self.voltage_model == COUPLED:
             # The coupled contact is integrated exactly with brackets of THETA R_load C_p at most:
             # bound the work of a contact rather than let a tiny load stall the run.
-            stiffness = barrier.K_eq + barrier.chi**2 / barrier.C_p
-            omega = math.sqrt(stiffness * (1.0 / (self.m + m_eq) + 1.0 / (self.M - m_eq)))
-            r_min = 1.0 / (MAX_COUPLED_STIFFNESS * omega * barrier.C_p)
+            try:
+                stiffness = barrier.K_eq + barrier.chi**2 / barrier.C_p
+                omega = math.sqrt(stiffness * (1.0 / (self.m + m_eq) + 1.0 / (self.M - m_eq)))
+                r_min = 1.0 / (MAX_COUPLED_STIFFNESS * omega * barrier.C_p)
+            except (OverflowError, ZeroDivisionError) as error:
+                raise self._beyond_double_range("the coupled circuit's stiffness (voltage_model = 1 takes any patch) "
+                                                "leaves", error) from None
             if self.R_load < r_min:
+                product = self.R_load * barrier.C_p
                 raise ValueError(
                     f"R_load = {self.R_load!r} Ohm is too small for voltage_model = 2: the circuit's rate "
-                    f"1/(R_load C_p) = {1.0 / (self.R_load * barrier.C_p):.3g} 1/s may exceed the contact's "
+                    f"1/(R_load C_p) = {1.0 / product if product else math.inf:.3g} 1/s may exceed the contact's "
                     f"{omega:.3g} rad/s by at most {MAX_COUPLED_STIFFNESS:g} times; allowed range "
                     f"[{r_min:.6g}, inf) Ohm (voltage_model = 1 takes any load)")
+
+    def _beyond_double_range(self, what: str, error: Exception) -> ValueError:
+        """The refusal of values beyond double range, ``what`` saying what left it (a subject and its
+        verb): the beam's and patch's values moved from their defaults, and the range their
+        stiffnesses and masses must keep."""
+        moved = ", ".join(f"{name} = {getattr(self, name)!r} {_unit(name)}" for name in GEOMETRY
+                          if getattr(self, name) != _default(name)) or "the geometry"
+        return ValueError(f"{moved}: {what} double range ({error}); allowed range: a beam and patch whose "
+                          "stiffnesses E W t^3 / 12, masses and capacitance lie within (5e-324, 1.8e308)")
 
     def replace(self, **changes) -> "Parameters":
         """A copy with some values changed, validated anew."""
