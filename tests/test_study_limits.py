@@ -156,3 +156,17 @@ def test_beyond_the_bound_of_a_slow_main_mass_the_fmu_refuses_the_studies_hold_s
     finally:
         instance.free()
         discard(folder)
+
+
+def test_the_fmu_refuses_a_contact_beyond_double_range_with_its_range_and_no_warning():
+    """A barrier damping of 1.8e308 N.s/m overflows the contact's matrix: numpy warned of it, and under
+    warnings as errors the FMU's refusal was that warning; the integrator refuses the phase with the
+    range of its brackets."""
+    import warnings
+
+    from piezo_fmu.solver import Simulator
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"C_eq = 1.7976931348623157e\+308 N.s/m.*allowed range: at least 1e-09 s"):
+            Simulator(Parameters(voltage_model=1, C_eq=sys.float_info.max))

@@ -68,10 +68,11 @@ def contact_matrix(M1: float, m1: float, K: float, C: float, K_eq: float, C_eq: 
         A[VOLT, [DU, DW]] = [-side * chi / C_p, side * chi / C_p]
         A[VOLT, VOLT] = -1.0 / (R * C_p)
     A[U, DU] = A[W, DW] = 1.0
-    A[DU] = force / M1
-    A[DU, U] -= K / M1
-    A[DU, DU] -= C / M1
-    A[DW] = -force / m1
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond double range: the integrator refuses it
+        A[DU] = force / M1
+        A[DU, U] -= K / M1
+        A[DU, DU] -= C / M1
+        A[DW] = -force / m1
     return A
 
 
