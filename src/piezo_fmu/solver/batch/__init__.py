@@ -28,8 +28,7 @@ from .limits import damper, study_error
 
 def damper_error(values: dict) -> str | None:
     """Why the batch engine cannot take the damper of the FMU parameter values ``values`` (None when
-    it can): the modes of its contact must be distinct and none growing (:func:`.limits.study_error`
-    without drives)."""
+    it can): its contact must be exact in modal form (:func:`.limits.study_error` without drives)."""
     return study_error(values)
 
 
