@@ -8,8 +8,9 @@ import warnings
 import numpy as np
 from numba import njit, prange
 
-from .cache import cache_dir, install, unwritable, version_folder
+from .cache import cache_dir, first_call_locked, install, unwritable, version_folder
 from .flat import march_one_flat
+from .inputs import march_input_one
 from .layout import WORK
 from .periods import march_one, separate_one
 from .registry import Target, entry
@@ -40,6 +41,14 @@ def separate(state, failed, groups, offset, scale, delta, drive, c, logs, sample
                      work)
 
 
+@entry(parallel=True)
+def march_input(state, failed, stats, counts, ledger, nodes, slopes, hold, c, positions):
+    """Every trajectory of ``state`` through a block of its own base input (:func:`.inputs.march_input_one`)."""
+    for i in prange(state.shape[1]):
+        work = np.empty(WORK)
+        march_input_one(i, state, failed, nodes, slopes, hold, c, positions, stats, counts, ledger, work)
+
+
 def build() -> Target:
     """The CPU's target, its compiled code kept in :func:`.cache.cache_dir` (or, where that cannot
     be written, compiled for this process alone, with a warning that says so)."""
@@ -55,6 +64,12 @@ def build() -> Target:
     # The inner functions touch no reference-counted object: without numba's runtime (``_nrt``)
     # their array arguments are not counted at every call, which cost more than the physics.
     inner = dict(cache=cache, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
-    return Target(source=njit(**inner), inline=njit(inline="always", **inner),
-                  parallel=njit(cache=cache, parallel=True, error_model="numpy"),
-                  serial=njit(cache=cache, error_model="numpy"))
+
+    def entry(**options):
+        """The compiler of entry points: kept in the cache, their first call locked against other
+        processes compiling into it (:class:`.cache.first_call_locked`)."""
+        jit = njit(cache=cache, error_model="numpy", **options)
+        return (lambda function: first_call_locked(jit(function), folder)) if cache else jit
+
+    return Target(source=njit(**inner), inline=njit(inline="always", **inner), parallel=entry(parallel=True),
+                  serial=entry())
