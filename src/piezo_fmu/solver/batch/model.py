@@ -146,6 +146,9 @@ class BatchModel:
     C: float
     coupled: bool
     tau_e: float      # s, R C_p: the decay time of a patch's voltage between contacts
+    K_eq: float       # N/m, the barrier's equivalent stiffness
+    C_eq: float       # N.s/m, the barrier's damping
+    C_p: float        # F, a patch's capacitance
 
     @classmethod
     def of(cls, params: Parameters) -> "BatchModel":
@@ -153,4 +156,4 @@ class BatchModel:
         barrier = damper.barrier
         return cls(params, FreeFlow.of(params.M, params.K, params.C), ContactFlow.of(damper), params.d / 2.0,
                    params.M, damper.M_contact, params.m, barrier.M_eq, params.K, params.C, damper.coupled,
-                   params.R_load * barrier.C_p)
+                   params.R_load * barrier.C_p, barrier.K_eq, params.C_eq, barrier.C_p)
