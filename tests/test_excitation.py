@@ -1,7 +1,8 @@
 """The random base excitation (piezo_fmu_harness.excitation): the generated input has the target
 PSD and is Gaussian, its displacement is bounded with the oracle's variance, a realization's bits
 do not depend on how it is taken, memory stays bounded, the envelope and the record path do what
-they say, the oracle is accurate, and every bad input is refused with its value and what is allowed.
+they say, the oracle is accurate, fmpy replays the rows as a loop that sets them before each step
+does, and every bad input is refused with its value and what is allowed.
 
 Statistical checks compare against intervals derived here (chi-square for averaged periodograms,
 the variance of a variance estimate from the PSD) at a stated level, with fixed seeds.
@@ -409,6 +410,36 @@ def test_the_replay_rows_are_the_inputs_at_each_steps_start_and_read_back_to_the
     assert np.array_equal(rows["time"], np.array([k * 0.004 for k in range(3000)]))  # k h, as fmpy computes it
     back = read_replay_csv(write_replay_csv(tmp_path / "replay.csv", rows))
     assert back.dtype == rows.dtype and all(np.array_equal(back[name], rows[name]) for name in rows.dtype.names)
+
+
+def test_fmpy_replays_the_rows_as_a_loop_that_sets_them_before_each_step():
+    from fmpy import simulate_fmu
+
+    from piezo_fmu_harness import fmus
+    from piezo_fmu_harness.fmu import FmuModel, Instance, discard
+
+    h, steps = 0.004, 1000
+    rows = replay_rows(Excitation(KanaiTajimi.soil("firm", 5 * LEVEL), h, seed=3), 0, steps)
+    values = {"p0": 0.0, "q0": 0.0}  # the damper at rest with the base
+    replayed = simulate_fmu(str(fmus.path()), start_values=values, input=rows, stop_time=steps * h, output_interval=h,
+                            output=["main_displacement", "impact_count"])
+    model = FmuModel(fmus.path())
+    unzipdir = model.extract()
+    instance = Instance(model, unzipdir)
+    try:
+        instance.start(values, inputs={"base_displacement": rows["base_displacement"][0],
+                                       "base_velocity": rows["base_velocity"][0]})
+        refs = [model.inputs["base_displacement"], model.inputs["base_velocity"]]
+        looped = [instance.read(["main_displacement"])["main_displacement"]]
+        for k in range(steps):
+            instance.fmu.setReal(refs, [rows["base_displacement"][k], rows["base_velocity"][k]])
+            instance.fmu.doStep(k * h, (k + 1) * h - k * h)
+            looped.append(instance.read(["main_displacement"])["main_displacement"])
+    finally:
+        instance.free()
+        discard(unzipdir)
+    assert replayed["impact_count"][-1] > 10  # the impacts make the motion sensitive to every bit of the input
+    assert np.array_equal(np.array(looped), replayed["main_displacement"])
 
 
 # -- refusals --------------------------------------------------------------------------------------
