@@ -38,31 +38,33 @@ def random_input(count: int, steps: int, h: float, level: float, seed: int = 1) 
 
 
 def core_run(params, nodes, slopes, h):
-    """The scalar core under the same hold: ``p`` at each step's end, its onsets and its ledger's
-    flows in the order of :data:`LEDGER`."""
+    """The scalar core under the same hold: ``p`` and the impacts so far at each step's end, and its
+    ledger's flows in the order of :data:`LEDGER`."""
     sim = Simulator(params, y0=nodes[0], v0=slopes[0])
-    positions = []
+    positions, impacts = [], []
     for k in range(len(slopes)):
         sim.advance((k + 1) * h, nodes[k], slopes[k])
         positions.append(sim.state.p)
+        impacts.append(sim.metrics.impact_count)
     e = sim.energy
-    return np.array(positions), sim.metrics.impact_count, np.array(
+    return np.array(positions), np.array(impacts), np.array(
         [e.work_base, e.dissipated_C, e.dissipated_Ceq, e.plastic, e.harvested_left, e.harvested_right])
 
 
 @pytest.mark.parametrize("case", DAMPERS)
 def test_under_its_own_input_each_trajectory_follows_the_core_and_its_ledger(case):
-    """Six random inputs, 2 s at h = 2 ms, some 20 to 50 impacts each: the core's contact onsets,
-    ``p`` at every step within 1e-9 m, and every flow of the ledger within 1e-8 of the base's work
-    (the two codes' trajectories part by some 1e-11 m over the impacts, the flows with them)."""
+    """Six random inputs, 2 s at h = 2 ms, some 20 to 50 impacts each: the core's contact onsets in
+    every step, ``p`` at every step within 1e-9 m, and every flow of the ledger within 1e-8 of the
+    base's work (the two codes' trajectories part by some 1e-11 m over the impacts, the flows with
+    them)."""
     params, h = DAMPERS[case], 2e-3
     nodes, slopes = random_input(6, 1000, h, 5.0)
     ensemble = InputEnsemble(params, h, np.zeros((6, 4)))
-    positions = ensemble.advance(nodes, slopes)
-    assert ensemble.counts.min() >= 5
+    positions, onsets = ensemble.advance(nodes, slopes, onsets=True)
+    assert ensemble.counts.min() >= 5 and np.array_equal(onsets.sum(axis=1), ensemble.counts)
     for i in range(6):
-        core_p, core_onsets, core_flows = core_run(params, nodes[i], slopes[i], h)
-        assert ensemble.counts[i] == core_onsets
+        core_p, core_impacts, core_flows = core_run(params, nodes[i], slopes[i], h)
+        assert np.array_equal(np.cumsum(onsets[i]), core_impacts)
         assert np.abs(positions[i] - core_p).max() < 1e-9
         assert np.abs(ensemble.ledger[i] - core_flows).max() < 1e-8 * core_flows[0]
     if params.voltage_model != 2:

@@ -89,20 +89,21 @@ class InputEnsemble:
         """The patch voltages (V) now, (2, n): left, right (0 unless ``voltage_model = 2``)."""
         return self._state[5:].copy()
 
-    def advance(self, nodes, slopes) -> np.ndarray:
+    def advance(self, nodes, slopes, onsets: bool = False):
         """March every trajectory through a block of its input: ``nodes`` ((n, B + 1), m; the first
         column where the last block ended) and ``slopes`` ((n, B), m/s). Returns ``p`` (m) at each
-        step's end, (n, B). A trajectory whose events could not be located is NaN from then on and
-        flagged in :attr:`failed`."""
+        step's end, (n, B), and with ``onsets`` also the contact onsets in each step, (n, B). A
+        trajectory whose events could not be located is NaN from then on and flagged in
+        :attr:`failed`."""
         nodes, slopes = np.asarray(nodes, float), np.asarray(slopes, float)
         if slopes.ndim != 2 or slopes.shape[0] != self.n or slopes.shape[1] < 1 \
                 or nodes.shape != (self.n, slopes.shape[1] + 1):
             raise ValueError(f"nodes {nodes.shape} and slopes {slopes.shape}: allowed shapes ({self.n}, B + 1) and "
                              f"({self.n}, B), B >= 1 steps")
-        positions = kernel.march_input(self.device, self._tables, self._hold, self._state, self.failed,
-                                       self._accounts, nodes, slopes)
+        positions, counts = kernel.march_input(self.device, self._tables, self._hold, self._state, self.failed,
+                                               self._accounts, nodes, slopes)
         self.steps += slopes.shape[1]
-        return positions
+        return (positions, counts) if onsets else positions
 
     def energy(self, y) -> np.ndarray:
         """The energy stored (J) in each trajectory now, with the base at ``y`` ((n,), m): kinetic,

@@ -109,19 +109,19 @@ def separate(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray,
 
 
 def march_input(device: str, tables: Tables, hold: np.ndarray, state: np.ndarray, failed: np.ndarray,
-                accumulators: tuple, nodes: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+                accumulators: tuple, nodes: np.ndarray, slopes: np.ndarray) -> tuple:
     """March every trajectory of ``state`` ((7, n), as :func:`march` takes it; updated in place, as is
     ``failed``) through a block of its own base input: ``nodes`` ((n, B + 1), m) and ``slopes``
     ((n, B), m/s), a trajectory's a row, and the hold step's constants ``hold``
     (:func:`.tables.input_hold`); ``accumulators`` ``(stats (n, STATS), counts (n,) int64, ledger (n,
-    LEDGER))`` are added to (:mod:`.inputs`). Returns ``positions`` (n, B), ``p`` (m) at each step's
-    end, a host array."""
+    LEDGER))`` are added to (:mod:`.inputs`). Returns host arrays (n, B): ``positions``, ``p`` (m)
+    at each step's end, and ``onsets``, the contact onsets in each step."""
     n = state.shape[1]
-    positions = np.empty(slopes.shape)
+    positions, onsets = np.empty(slopes.shape), np.empty(slopes.shape, np.int32)
     args = (state, failed, *accumulators, np.ascontiguousarray(nodes, float), np.ascontiguousarray(slopes, float),
-            np.ascontiguousarray(hold, float), tables.constants, positions)
-    _launch(device, _entries(device).march_input, args, n, (0, 1, 2, 3, 4), 1)
-    return positions
+            np.ascontiguousarray(hold, float), tables.constants, positions, onsets)
+    _launch(device, _entries(device).march_input, args, n, (0, 1, 2, 3, 4), 2)
+    return positions, onsets
 
 
 def accumulators(n: int) -> tuple:

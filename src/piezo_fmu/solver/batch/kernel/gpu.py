@@ -48,12 +48,12 @@ def separate(state, failed, groups, offset, scale, delta, drive, c, logs, sample
 
 
 @entry(gpu=True)
-def march_input(state, failed, stats, counts, ledger, nodes, slopes, hold, c, positions):
+def march_input(state, failed, stats, counts, ledger, nodes, slopes, hold, c, positions, onsets):
     """Every trajectory of ``state`` through a block of its own base input (:func:`.inputs.march_input_one`)."""
     i = cuda.grid(1)
     if i < state.shape[1]:
         work = cuda.local.array(WORK, float64)
-        march_input_one(i, state, failed, nodes, slopes, hold, c, positions, stats, counts, ledger, work)
+        march_input_one(i, state, failed, nodes, slopes, hold, c, positions, onsets, stats, counts, ledger, work)
 
 
 def build(registers: int | None = REGISTERS) -> Target:

@@ -8,6 +8,7 @@ block ended) with the slopes ``slopes[i, k]`` (m/s), exactly as an FMU fed ``bas
 nodes[i, k]`` and ``base_velocity = slopes[i, k]`` at each step's start moves (each trajectory's
 input a row: read in order). Each step goes as in
 :mod:`.rounds`, and besides the motion the march writes ``p`` at each step's end (``positions``) and
+the contact onsets in each step (``onsets``), and
 adds to each trajectory's accumulators, step by step, what :mod:`.layout`'s ``S_*`` name of its
 motion (``stats``), its contact onsets (``counts``) and its energy flows (``ledger``,
 :mod:`.ledger`): kept across blocks, they come out the same bits however the input is cut.
@@ -60,25 +61,27 @@ def input_step(x, y0, v, hold, c, work):
 
 
 @source
-def march_input_one(i, state, failed, nodes, slopes, hold, c, positions, stats, counts, ledger, work):
+def march_input_one(i, state, failed, nodes, slopes, hold, c, positions, onsets, stats, counts, ledger, work):
     """Trajectory ``i`` through the block of ``slopes.shape[1]`` steps of its input, in place: its
-    ``positions`` row written (NaN from a failed location on), its ``stats``, ``counts`` and
-    ``ledger`` rows added to (its ``stats`` NaN once it failed)."""
+    ``positions`` and ``onsets`` rows written (NaN and 0 from a failed location on), its ``stats``,
+    ``counts`` and ``ledger`` rows added to (its ``stats`` NaN once it failed)."""
     x = motion_of(state, i)
     bad = failed[i]
     h = hold[H_STEP]
     squares, absolute, largest, largest_p = stats[i, S_U2], stats[i, S_P2], stats[i, S_UMAX], stats[i, S_PMAX]
-    onsets = counts[i]
+    total = counts[i]
     flows = (ledger[i, L_WORK], ledger[i, L_C], ledger[i, L_CEQ], ledger[i, L_PLASTIC], ledger[i, L_LEFT],
              ledger[i, L_RIGHT])
     for k in range(slopes.shape[1]):
         if bad:
             positions[i, k] = NAN
+            onsets[i, k] = 0
             continue
         y0, v, y1 = nodes[i, k], slopes[i, k], nodes[i, k + 1]
         p0, dp0 = x[0], x[1]
         x, count, bad, step = input_step(x, y0, v, hold, c, work)
-        onsets += count
+        onsets[i, k] = count
+        total += count
         flows = (flows[0] + step[0], flows[1] + step[1], flows[2] + step[2], flows[3] + step[3],
                  flows[4] + step[4], flows[5] + step[5])
         p1, dp1 = x[0], x[1]
@@ -93,7 +96,7 @@ def march_input_one(i, state, failed, nodes, slopes, hold, c, positions, stats, 
     if bad:
         squares = absolute = largest = largest_p = NAN
     stats[i, S_U2], stats[i, S_P2], stats[i, S_UMAX], stats[i, S_PMAX] = squares, absolute, largest, largest_p
-    counts[i] = onsets
+    counts[i] = total
     ledger[i, L_WORK], ledger[i, L_C], ledger[i, L_CEQ] = flows[0], flows[1], flows[2]
     ledger[i, L_PLASTIC], ledger[i, L_LEFT], ledger[i, L_RIGHT] = flows[3], flows[4], flows[5]
     store_motion(state, i, x)
