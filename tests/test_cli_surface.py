@@ -15,7 +15,7 @@ CAPTURED = Path(__file__).resolve().parent / "data" / "cli_surface.json"
 
 
 #: Studies added after the capture (issues 23 and 26), in the order --help lists them.
-ADDED = ("bifurcation", "basins", "fractions")
+ADDED = ("bifurcation", "basins", "fractions", "random")
 
 
 def test_the_commands_are_those_captured_and_the_studies_added_since():

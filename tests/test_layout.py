@@ -80,7 +80,7 @@ def test_imports_run_one_way_fmi_then_solver_then_model(path):
 #: The studies of many starts march them on the core's batch engine (issue 27); nothing else of the
 #: harness reads the core, and they read nothing of it but the batch engine.
 BATCH_STUDIES = ("piezo_fmu_harness.studies.basins", "piezo_fmu_harness.studies.fractions",
-                 "piezo_fmu_harness.studies.bifurcation")
+                 "piezo_fmu_harness.studies.bifurcation", "piezo_fmu_harness.studies.random")
 BATCH_ENGINE = "piezo_fmu.solver.batch"
 
 
