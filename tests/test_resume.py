@@ -26,6 +26,7 @@ STUDIES = {
     "basins": (("--ratio", 1.2, "--grid", 2, "--confirm", 0), "points.jsonl"),
     "fractions": (("--ratio-min", 1.15, "--ratio-max", 1.2, "--count", 2, "--starts", 2, "--max-cycles", 100,
                    "--confirm", 0), "points.jsonl"),
+    "random": (("--realizations", 60, "--duration", 2, "--warmup", 0.5, "--confirm", 0), "points.jsonl"),
 }
 COMMON = ("--jobs", 1, "--no-progress", "--fmu", FMU)
 

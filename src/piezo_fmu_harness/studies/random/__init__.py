@@ -3,6 +3,7 @@ acceleration, by how much the damper reduces the main mass's response, how sure 
 harvests.
 
 - :mod:`.spec`: what a study asks for, which every worker rebuilds its excitation from;
+- :mod:`.command_line`: the options checked and turned into a spec, the run;
 - :mod:`.march`: a chunk of realizations marched with and without the damper on the batch engine;
 - :mod:`.statistics`: the estimates' 95% intervals over the realizations, and the streamed Welch PSD;
 - :mod:`.results`: the estimates at each level and the response PSD from the chunks;
@@ -102,6 +103,6 @@ def register(commands) -> None:
 
 
 def command(args) -> int:
-    from .command import run
+    from .command_line import run
 
     return run(args)

@@ -97,21 +97,26 @@ def check_task(instance, spec_dict: dict, realization: int, level: int) -> dict:
 
 #: The FMU and the batch engine have parted where their main masses are farther apart (m).
 PART = 1e-9
+#: Standard deviations of the difference of two realizations' window measures within which the FMU's
+#: and the engine's lie, once parted.
+SPREADS = 3.0
 
 
 def verdict(check: dict, spread: dict | None) -> dict:
     """``check`` (:func:`check_task`'s) with its verdict: it **agrees** when the FMU follows the batch
     engine within :data:`PART` over the first second and its RMS and impacts over the window lie
-    within ``spread`` (``rms_relative`` (m) and ``impacts``: one standard deviation of the
-    realizations' own, at that level with the damper; None for a study of one realization, a record,
-    whose window is then not judged) of the engine's. Once the two have parted (the
-    impacts make the motion chaotic, and rounding decides an impact's timing), they are two
-    trajectories of the same input, whose window measures differ by less than two realizations'
-    do; an error of the engine or the FMU would not."""
+    within :data:`SPREADS` ``sqrt(2)`` standard deviations of the realizations' own (``spread``:
+    ``rms_relative`` (m) and ``impacts``, at that level with the damper; None for a study of one
+    realization, a record, whose window is then not judged) of the engine's. Once the two have parted
+    (the impacts make the motion chaotic, and rounding decides an impact's timing), they are two
+    trajectories of the same input, whose window measures differ by no more than two realizations'
+    do (a standard deviation of ``sqrt(2)`` theirs); an engine or an FMU that moved otherwise would
+    part at once."""
     close = check["largest_gap_first_second_m"] <= PART
     if spread is None:
         return {**check, "agrees": bool(close), "tolerance_rms_relative_m": None, "tolerance_impacts": None}
-    same = abs(check["rms_relative_fmu"] - check["rms_relative_engine"]) <= spread["rms_relative"] and \
-        abs(check["impacts_fmu"] - check["impacts_engine"]) <= spread["impacts"]
-    return {**check, "agrees": bool(close and same), "tolerance_rms_relative_m": spread["rms_relative"],
-            "tolerance_impacts": spread["impacts"]}
+    tolerance = {name: SPREADS * math.sqrt(2.0) * value for name, value in spread.items()}
+    same = abs(check["rms_relative_fmu"] - check["rms_relative_engine"]) <= tolerance["rms_relative"] and \
+        abs(check["impacts_fmu"] - check["impacts_engine"]) <= tolerance["impacts"]
+    return {**check, "agrees": bool(close and same), "tolerance_rms_relative_m": tolerance["rms_relative"],
+            "tolerance_impacts": tolerance["impacts"]}
