@@ -143,8 +143,8 @@ def test_the_energy_ledger_closes_for_every_realization(saved):
 def test_one_realizations_bits_do_not_depend_on_the_others_the_workers_or_the_block(tmp_path, monkeypatch):
     """Realization 3's record: in a chunk of 6 and alone; with blocks of 4096 steps and of 777; and a
     whole study on one worker and on two: the same bits."""
-    from piezo_fmu_harness.studies.random import march
-    from piezo_fmu_harness.studies.random.spec import RandomSpec
+    from piezo_fmu_harness.random_response import march
+    from piezo_fmu_harness.random_response.spec import RandomSpec
 
     out, summary = run(tmp_path, "one", "--realizations", 6, "--duration", 10, "--warmup", 2, "--confirm", 0)
     header = json.loads((out / "random.json").read_text())

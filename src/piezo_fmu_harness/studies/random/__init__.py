@@ -2,10 +2,8 @@
 acceleration, by how much the damper reduces the main mass's response, how sure that is, and what it
 harvests.
 
-- :mod:`.spec`: what a study asks for, which every worker rebuilds its excitation from;
-- :mod:`.command_line`: the options checked and turned into a spec, the run;
-- :mod:`.march`: a chunk of realizations marched with and without the damper on the batch engine;
-- :mod:`.statistics`: the estimates' 95% intervals over the realizations, and the streamed Welch PSD;
+- :mod:`.command_line`: the options checked and turned into a spec
+  (:mod:`piezo_fmu_harness.random_response`, which marches the realizations), the run;
 - :mod:`.results`: the estimates at each level and the response PSD from the chunks;
 - :mod:`.trace`: one realization step by step, on the batch engine and through the FMU alone;
 - :mod:`.study`: the chunks as tasks, the FMU's checks, the files;

@@ -9,7 +9,7 @@ import sys
 import time
 
 from . import DEFAULT_BAND, DEFAULT_LEVEL, PSD_KINDS, STEPS_PER_TOP
-from .spec import RandomSpec, default_warmup
+from ...random_response.spec import RandomSpec, default_warmup
 
 #: The FMU's start state of every realization: at rest (the base too, ``y = 0``).
 START = {"p0": 0.0, "q0": 0.0, "dp0": 0.0, "dq0": 0.0}
@@ -117,7 +117,7 @@ def spec_of(args, model, instance) -> RandomSpec:
         realizations = whole(study.DEFAULT_REALIZATIONS if args.realizations is None else args.realizations,
                              "--realizations", 1, "at least one realization")
     try:
-        from .spec import build_source
+        from ...random_response.spec import build_source
         from ...excitation import Excitation
         excitation = Excitation(build_source(source, levels[0] if levels else None), step=step, f_low=args.f_low)
     except ValueError as error:

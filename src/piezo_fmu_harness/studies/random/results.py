@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .march import DAMPERS, psd_length
-from .spec import RandomSpec
-from .statistics import mean_interval, paired_ratio, quantile_interval, rms_interval, welch_density
+from ...random_response.march import DAMPERS, psd_length
+from ...random_response.spec import RandomSpec
+from ...random_response.statistics import mean_interval, paired_ratio, quantile_interval, rms_interval, welch_density
 
 #: The per-realization measures kept in ``random.nc``, their units and descriptions.
 MEASURES = {

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from ...store import Damaged, open_folder, require, within
-from .march import DAMPERS, march_chunk
+from ...random_response.march import DAMPERS, march_chunk
 from .results import MEASURES, arrays, psd, summarize, write_json
-from .spec import RandomSpec
+from ...random_response.spec import RandomSpec
 
 HEADER_FILE = "random.json"
 #: Realizations a study marches by default, and the window (s) it analyses.

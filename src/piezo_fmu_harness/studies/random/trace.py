@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .spec import RandomSpec
+from ...random_response.spec import RandomSpec
 
 
 def inputs(spec: RandomSpec, realization: int, level: int, steps: int) -> tuple[np.ndarray, np.ndarray]:

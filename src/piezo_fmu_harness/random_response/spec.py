@@ -84,7 +84,7 @@ class RandomSpec:
 
     def excitation(self, level_index: int = 0):
         """The :class:`~piezo_fmu_harness.excitation.Excitation` of level ``level_index``."""
-        from ...excitation import Excitation, JenningsHousnerTsai, ShinozukaSato
+        from ..excitation import Excitation, JenningsHousnerTsai, ShinozukaSato
 
         envelope = None
         if self.envelope is not None:
@@ -106,7 +106,7 @@ class RandomSpec:
 
 def build_source(source: dict, level: float | None):
     """The spectrum or record that ``source`` describes (``kind`` and its parameters), at ``level``."""
-    from ...excitation import CloughPenzien, KanaiTajimi, Record, TablePSD, WhiteNoise
+    from ..excitation import CloughPenzien, KanaiTajimi, Record, TablePSD, WhiteNoise
 
     kind = source["kind"]
     if kind == "white":
