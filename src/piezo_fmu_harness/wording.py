@@ -24,3 +24,8 @@ def listed(names) -> str:
     """``names`` joined by ``, ``, or by ``; `` when one of them holds a comma."""
     names = [str(name) for name in names]
     return ("; " if any("," in name for name in names) else ", ").join(names)
+
+
+def per_cycle(impacts: float) -> str:
+    """Impacts per forcing cycle as a rate: ``1 impact/cycle``, ``2.4 impacts/cycle``."""
+    return f"{impacts:g} impact{'' if impacts == 1 else 's'}/cycle"

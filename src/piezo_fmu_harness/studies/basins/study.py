@@ -21,8 +21,8 @@ Files: ``basins.nc`` (``basin``: the attractor each start reaches, on ``p0 x dp0
 the coordinate ``attractor``; the periods it took; the attractors with their shares and 95%
 intervals, over ``attractor``), ``basins.csv`` (a row a start), ``summary.json`` (the budget, the
 shares, what stayed undecided, the survival fit: the mean transient lifetime with its interval and
-the plateau, the boundary's uncertainty, the checks), ``basins.png`` (the map and the transient's
-length).
+the plateau, the boundary's uncertainty, the checks, the times of the marching and of the checks),
+``basins.png`` (the map and the transient's length); ``basins.json`` and ``points.jsonl``.
 
 This study reads the simulation core's batch engine (``piezo_fmu.solver.batch``) besides the FMU,
 which checks it: the one exception, with the fractions and the bifurcation diagram, to the
@@ -43,6 +43,7 @@ from ...starts.chunks import check_chunk, chunks
 from ...starts.fmu_checks import tally
 from ...starts.transients import counts, escape
 from ...store import open_folder, within
+from ...wording import per_cycle
 
 HEADER_FILE = "basins.json"
 #: The files a basin map writes besides its header and ``points.jsonl``.
@@ -237,7 +238,7 @@ def _distinct(names: list[str]) -> list[str]:
 
 def _name(attractor: dict) -> str:
     if attractor["kind"] == "orbit":
-        return (f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle, "
+        return (f"order {attractor['order']}, {per_cycle(attractor['impacts_per_cycle'])}, "
                 f"{1e3 * attractor['amplitude']:.2f} mm")
     if attractor["kind"] == "no impacts":
         return f"no impacts, {1e3 * attractor['amplitude']:.2f} mm"

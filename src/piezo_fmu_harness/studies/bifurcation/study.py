@@ -25,15 +25,17 @@ it persists with an exponent near 0 and a line spectrum, and **undecided** other
 (converging)`` when its exponent lies below 0), with the cloud's mean transient lifetime where it
 has one.
 
-**The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
-of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
-diagram gives (:mod:`piezo_fmu_harness.starts.destination`); ``summary.json`` lists each check.
+**The FMU checks the answer**: from the start of a sample of points (one of each class and each
+orbit's order and impacts, the soonest, and ``--confirm`` more: :mod:`.chains`), the FMU is marched
+and must reach the motion the diagram gives (:mod:`piezo_fmu_harness.starts.destination`);
+``summary.json`` lists each check. The sweeps are recorded as they go (:mod:`.chains`, ``--resume``).
 
 Files: ``bifurcation.nc`` (dims direction x omega x sample; the periods each point took and its
 cloud's lifetime), ``bifurcation.csv`` (a row a sample), ``points.json`` (the damper's values and each sweep's points: the
 start, the motion, the exponent's interval, the cloud's survival fit, the start-periods of each),
-``summary.json`` (the budget, the start-periods of the sweeps and of the clouds and the CPU seconds,
-the classes and where, the checks), ``bifurcation.png``.
+``summary.json`` (the budget, the times of the marching and of the checks, the start-periods of the
+sweeps and of the clouds and the CPU seconds, the classes and where, the checks), ``bifurcation.png``;
+``bifurcation.json`` and ``points.jsonl`` (:mod:`.chains`).
 
 This study reads the simulation core's batch engine besides the FMU, which checks it: the one
 exception, with the basins and the fractions, to the harness's rule that it reads nothing but the FMU.

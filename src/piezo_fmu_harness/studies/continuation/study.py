@@ -57,7 +57,7 @@ def seeds_of(chains: list[dict]) -> list[dict]:
         for record in chain["records"]:
             orbits = ([record] if record.get("settled") else []) + list(record.get("unstable_orbits") or ())
             for orbit in orbits:
-                if orbit.get("impacts_per_cycle", 0) > 0 and orbit.get("verdict") in ("stable", "unstable"):
+                if (orbit.get("impacts_per_cycle") or 0) > 0 and orbit.get("verdict") in ("stable", "unstable"):
                     seeds.append({"lam": record["lam"], "state": orbit["state"], "phase": orbit["phase"],
                                   "order": orbit["order"], "amplitude": orbit["amplitude"], "depth": 0,
                                   "impacts_per_cycle": orbit["impacts_per_cycle"],
@@ -101,8 +101,8 @@ class Continuation:
             tasks = [(direction, seed_chain, (*args, lams, direction))
                      for direction, lams in (("up", self.lams), ("down", self.lams[::-1])) if direction not in chains]
             for direction, result in backend.run_tasks(tasks):
-                chains[direction] = {"index": ("up", "down").index(direction), **jsonable(result)}
-                log(chains[direction])
+                chains[direction] = {"index": ("up", "down").index(direction), **result}
+                log(jsonable(chains[direction]))
                 bar.update(1)
             self.chains = [chains["up"], chains["down"]]
             self.seconds["seeds"] = time.perf_counter() - begin
@@ -267,9 +267,11 @@ def write(study: Continuation, folder: Path, parameter_units: str) -> list[Path]
              folder / "sweeps.jsonl"]
     save_dataset(ds, files[0])
     units = units_of(ds)
-    csv_frame(ds.drop_dims("event").drop_vars(["multiplier_real", "multiplier_imag", "state"]).to_dataframe()
-              .reset_index(), units).to_csv(files[1], index=False)
-    csv_frame(ds.drop_dims(["point"]).to_dataframe().reset_index(), units).to_csv(files[2], index=False)
+    # a row a point, a row a bifurcation (the multipliers and the state stay in the NetCDF)
+    csv_frame(ds.drop_dims(["event", "coordinate", "multiplier"]).to_dataframe().reset_index(), units).to_csv(
+        files[1], index=False)
+    csv_frame(ds.drop_dims(["point", "coordinate", "multiplier"]).to_dataframe().reset_index(), units).to_csv(
+        files[2], index=False)
     files[3].write_text(json.dumps(summarize(study), indent=2) + "\n")
     with open(files[4], "w") as out:
         for chain in study.chains:

@@ -36,7 +36,6 @@ def draw(ds, path: Path) -> Path:
     top.set_ylabel("share of the starts (%)")
     top.set_ylim(0, 100)
     top.set_xlim(*limits)
-    top.set_xlabel(FREQUENCY)
     top.set_title(f"Where {ds.attrs['starts_per_frequency']} random starts go, at each frequency", fontsize=9)
     top.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     for k, name in enumerate(names):

@@ -19,9 +19,10 @@ and the nearest amplitude (:func:`piezo_fmu_harness.starts.attractors.track_name
 keeps one name across the band.
 
 The frequencies are grouped into chunks of the sweep engine, each chunk one batch, appended to
-``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: at every frequency
-the start that reached each attractor soonest, and ``--confirm`` more drawn at random, are marched
-through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
+``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: one start of every
+attractor across the band (by its name), the one that reached it soonest, and ``--confirm`` random
+starts more (:mod:`piezo_fmu_harness.starts.fmu_checks`) are marched through the FMU, which must
+reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
 
 **A start ends where its trajectory ends** (issue 31). ``--max-cycles`` is a budget, not a
 verdict: a start not seen reaching an orbit within it is **undecided**, reported with its share,
@@ -34,8 +35,9 @@ chaotic (or quasi-periodic) only where the plateau is shown and their own expone
 Files: ``fractions.nc`` (the fraction of each attractor over frequency, adding to 1 at every
 frequency, with its 95% interval; each attractor's amplitude and impacts per cycle; the undecided
 share, the mean transient lifetime with its interval, the plateau and the survival curve over
-frequency), ``fractions.csv``, ``transients.csv`` (a row a frequency), ``summary.json`` (the budget,
-the shares and what stayed undecided at each frequency, the checks), ``fractions.png`` (the shares
+frequency), ``fractions.csv``, ``transients.csv`` (a row a frequency; each column with its unit),
+``summary.json`` (the budget, the shares and what stayed undecided at each frequency, the checks, the
+times of the marching and of the checks), ``fractions.png`` (the shares
 stacked over frequency, and each attractor's amplitude), ``transients.png`` (the mean lifetime over
 frequency, and the survival curves of a few frequencies).
 
