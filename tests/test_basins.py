@@ -44,7 +44,9 @@ def summary(basins) -> dict:
 
 
 def test_the_summary_gives_the_marching_time_apart_from_the_fmus_checks(summary):
-    assert 0 < summary["marching_wall_s"] < summary["wall_s"]
+    assert 0 < summary["marching_s"] < summary["wall_s"] and 0 < summary["checking_s"] < summary["wall_s"]
+    assert summary["marching_s"] + summary["checking_s"] <= summary["wall_s"]
+    assert summary["fmu_checks"]["seconds"] == summary["checking_s"] and summary["fmu_checks"]["checked"] > 0
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +110,7 @@ def test_basins_nc_selects_each_attractor_by_its_label_on_the_map(basins, summar
     assert names.dims == ("p0", "dp0") and str(names.values[0, ISSUE_START]) == label_of(basins, summary,
                                                                                           ISSUE_START)["name"]
     table = pandas.read_csv(basins / "basins.csv")
-    assert list(table.columns) == ["p0", "dp0", "attractor", "periods", "attractor_name"]
+    assert list(table.columns) == ["p0_m", "dp0_m_per_s", "attractor", "periods", "attractor_name"]
     assert (table["attractor"].values == ds["basin"].values.ravel()).all()
 
 

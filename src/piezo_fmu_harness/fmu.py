@@ -137,7 +137,10 @@ class FmuModel:
         self.inputs: dict[str, int] = {}
         #: Calculated parameters (fixed after initialization), as ``(type, valueReference)``.
         self.calculated: dict[str, tuple[str, int]] = {}
+        #: The unit of every variable (None for a number without one), by name.
+        self.units: dict[str, Optional[str]] = {}
         for variable in self.model_description.modelVariables:
+            self.units[variable.name] = variable.unit or (variable.declaredType.unit if variable.declaredType else None)
             if variable.causality == "parameter":
                 self.parameters[variable.name] = Parameter(
                     name=variable.name, type=variable.type, value_reference=variable.valueReference,

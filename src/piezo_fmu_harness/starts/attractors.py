@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from ..wording import per_cycle
 from .transients import counts, escape
 
 #: Two orbit records of one drive are the same attractor when a section state of one lies within
@@ -221,7 +222,7 @@ def base_name(attractor: dict) -> str:
     """The name of an attractor's kind: "order n, k impacts/cycle", "no impacts", or the class of a
     motion that is not periodic."""
     if attractor["kind"] == "orbit":
-        return f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle"
+        return f"order {attractor['order']}, {per_cycle(attractor['impacts_per_cycle'])}"
     if attractor["kind"] in ("chaotic", "quasi-periodic"):
         return f"{attractor['kind']} (persists)"
     return attractor["kind"]

@@ -13,19 +13,20 @@ from __future__ import annotations
 def register(commands) -> None:
     """``piezo-fmu optimize``."""
     from ...spec import DEFAULT_SWEEP_STEP
-    from ...options import band_options, common, engine, results_folder
+    from ...options import band_options, common, damping_option, results_options, seed_option, work_options
     from . import search as opt
     from .command import optimize
 
     optimizer = commands.add_parser(
-        "optimize", help="a design optimiser (differential evolution) over FMU parameters",
+        "optimize", help="design optimisation (differential evolution)",
         description="Search --param parameters within bounds with scipy's differential_evolution, its evaluations "
                     "run in parallel on the sweep engine, to minimise J: under --objective perfectibility "
                     "-100 (w_DI DI/DI_ref + w_V V_rms/V_ref) over a free decay (eq. 31 with reference values); under "
                     "--objective forced w_amplitude peak_with/peak_without + w_transmissibility peak/Y - w_power "
                     "P/P_ref over a band of harmonic base motion. References are the reference design's (the FMU's "
                     "start values and --set) unless given. Reports the optimum, its sensitivity and the best point "
-                    "of a grid of the same budget; every evaluation is appended to evaluations.jsonl (--resume).")
+                    f"of a grid of the same budget: {', '.join(opt.FILES)}; what was asked goes to optimize.json and "
+                    "every evaluation to evaluations.jsonl (--resume).")
     optimizer.add_argument("--param", action="append", default=[], metavar="NAME=LO:HI",
                            help="a parameter to search and its bounds (SI), repeatable")
     optimizer.add_argument("--objective", choices=tuple(opt.TERMS), default="perfectibility",
@@ -36,21 +37,20 @@ def register(commands) -> None:
     optimizer.add_argument("--reference", action="append", default=[], metavar="TERM=VALUE",
                            help="reference value of a term, SI: DI (m/s), V_rms (V); power (W), amplitude_without (m) "
                                 "(default: the reference design's)")
-    optimizer.add_argument("--damping", choices=("eq29", "ls"), default="eq29",
-                           help="the damping term of perfectibility: eq29 (default) or ls (DI_ls)")
+    damping_option(optimizer)
     for option, kind, metavar, text in (
             ("--maxiter", int, "N", "generations of differential evolution at most (default 30; forced 8)"),
             ("--popsize", int, "N", "population per searched parameter (default 15; forced 6)"),
             ("--tol", float, "TOL", "differential evolution's relative tolerance (default 0.01)"),
-            ("--seed", int, "N", "seed of the search (default 1): the same seed proposes the same designs"),
             ("--sensitivity-step", float, "F", "step of the sensitivity, a fraction of each range (default 0.02)")):
         optimizer.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
+    seed_option(optimizer)
     optimizer.add_argument("--polish", action="store_true",
-                           help="polish the best design with L-BFGS-B (finite differences): for smooth objectives; "
+                           help="polish the best design with Nelder-Mead in the unit box: for smooth objectives; "
                                 "impacts make them piecewise, where it spends evaluations for nothing")
     optimizer.add_argument("--no-grid", action="store_true", help="no grid of the same budget to compare with")
     common(optimizer, DEFAULT_SWEEP_STEP, "free-decay runs of the perfectibility objective")
     band_options(optimizer, opt.BAND_DEFAULTS)
-    results_folder(optimizer, "optimize")
-    engine(optimizer)
+    results_options(optimizer, "optimize", resumable=True)
+    work_options(optimizer)
     optimizer.set_defaults(run=optimize)

@@ -99,7 +99,8 @@ def optimize(args) -> int:
     if not 0 < settings["sensitivity_step"] <= 0.5:
         raise UsageError(f"--sensitivity-step {settings['sensitivity_step']:g}: a fraction of each range; allowed "
                          "range (0, 0.5]")
-    settings.update(polish=args.polish, grid=not args.no_grid)
+    settings.update(polish=args.polish, grid=not args.no_grid, seed=whole(args.seed, "--seed", 0,
+                                                                          "the seed is a whole number >= 0"))
     if args.damping == "ls" and "damping_inclination_ls" not in model.outputs:
         raise UsageError(f"--damping ls: the FMU {model.path} lacks the output damping_inclination_ls; rebuild it")
     stop_time, step = times(args, DEFAULT_SWEEP_STEP)
@@ -123,7 +124,11 @@ def optimize(args) -> int:
                    else make_backend(args, model, unzipdir, jobs))
         print(f"{PROG} optimize: {args.objective} objective over {', '.join(names)} on {backend.description}"
               + (f" ({len(cache)} evaluations already recorded)" if cache else ""), file=sys.stderr)
-        optimizer = opt.Optimizer(problem, backend, folder, references=dict(references), cache=cache)
+        from tqdm import tqdm
+
+        optimizer = opt.Optimizer(problem, backend, folder, references=dict(references), cache=cache,
+                                  bar=tqdm(unit="evaluation", desc="optimize", dynamic_ncols=True, file=sys.stderr,
+                                           disable=True if args.no_progress else None))
         previous = signal.signal(signal.SIGTERM, interrupt)
         try:
             report = opt.run(optimizer, [parameters[name] for name in names], settings["maxiter"],
@@ -136,6 +141,7 @@ def optimize(args) -> int:
         except ValueError as error:
             raise UsageError(str(error)) from None
         finally:
+            optimizer.bar.close()
             signal.signal(signal.SIGTERM, previous)
     finally:
         if backend is not None and not isinstance(backend, InProcess):

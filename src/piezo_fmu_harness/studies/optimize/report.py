@@ -14,11 +14,18 @@ import numpy as np
 
 from ...drawing import new_figure, save_png
 from ...store import PointStore
+from ...wording import counted
 from .search import EVALUATIONS_FILE, Problem
+
+
+#: The units of an evaluation's measures (``evaluations.csv``).
+MEASURE_UNITS = {"DI": "m/s", "DI_ls": "m/s", "V_rms": "V", "amplitude": "m", "amplitude_down": "m",
+                 "amplitude_without": "m", "power": "W"}
 
 
 def write_report(report: dict, problem: Problem, folder: Path, model) -> list[Path]:
     """``report.json``, ``report.md``, ``evaluations.csv`` and ``convergence.png``."""
+    from ...datasets import csv_frame
 
     folder = Path(folder)
     (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -30,7 +37,9 @@ def write_report(report: dict, problem: Problem, folder: Path, model) -> list[Pa
              **{f"term_{k}": v for k, v in (r.get("terms") or {}).items()},
              **{f"measure_{k}": v for k, v in (r.get("measures") or {}).items()}, "status": r["status"],
              "seconds": r["seconds"]} for r in records]
-    pandas.DataFrame(rows).to_csv(folder / "evaluations.csv", index=False)
+    units = {**{name: model.units.get(name) for name in problem.names}, "seconds": "s",
+             **{f"measure_{k}": unit for k, unit in MEASURE_UNITS.items()}}
+    csv_frame(pandas.DataFrame(rows), units).to_csv(folder / "evaluations.csv", index=False)
     figure = convergence_figure(records, report, folder / "convergence.png")
     return [folder / "report.json", folder / "report.md", folder / "evaluations.csv", figure]
 
@@ -96,7 +105,7 @@ def convergence_figure(records: list[dict], report: dict, path: Path) -> Path:
     grid = report.get("grid")
     if grid and grid.get("best"):
         ax.axhline(grid["best"]["objective"], color="k", ls="--", lw=1.0,
-                   label=f"best of the grid of the same budget ({grid['evaluations']} points)")
+                   label=f"best of the grid of the same budget ({counted(grid['evaluations'], 'point')})")
     ax.set_xlabel("evaluation (differential evolution, then its polish)")
     ax.set_ylabel("objective J (minimised)")
     ax.grid(alpha=0.3)

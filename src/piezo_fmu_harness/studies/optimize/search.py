@@ -2,7 +2,7 @@
 
 ``scipy.optimize.differential_evolution`` searches chosen parameters within bounds. Its
 ``workers`` map is the sweep engine (process pool, Dask or in-process), so a generation's
-evaluations run in parallel; the final polish (L-BFGS-B) goes through the same map. The objective
+evaluations run in parallel; the final polish (Nelder-Mead, ``--polish``) goes through the same map. The objective
 ``J`` is minimised; it is a weighted sum of dimensionless terms, each normalised by a stated
 reference value, the reference design's own (the FMU's start values and ``--set``, the nominal
 damper) unless given:
@@ -55,6 +55,8 @@ from ...store import PointStore, open_folder
 from .log import EVALUATIONS_FILE, record_check
 
 HEADER_FILE = "optimize.json"
+#: The files an optimisation writes besides its header and ``evaluations.jsonl``.
+FILES = ("report.md", "report.json", "evaluations.csv", "convergence.png")
 #: Each objective's terms: +1 for a term to be large (it enters J with a minus sign), -1 small.
 TERMS = {
     "perfectibility": {"DI": 1, "V_rms": 1},
@@ -72,8 +74,8 @@ SCALE = {"perfectibility": 100.0, "forced": 1.0}
 REFERENCES = {"perfectibility": ("DI", "V_rms"), "forced": ("power", "amplitude_without")}
 #: The search's defaults, by objective: a forced evaluation sweeps a band, a free decay is one run.
 SEARCH_DEFAULTS = {
-    "perfectibility": {"maxiter": 30, "popsize": 15, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
-    "forced": {"maxiter": 8, "popsize": 6, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
+    "perfectibility": {"maxiter": 30, "popsize": 15, "tol": 0.01, "sensitivity_step": 0.02},
+    "forced": {"maxiter": 8, "popsize": 6, "tol": 0.01, "sensitivity_step": 0.02},
 }
 #: The forced objective's band: w / sqrt(K/M) from 0.8 to 1.2 at 9 frequencies, at most 150 cycles
 #: each (every evaluation sweeps it); a single frequency is allowed.
@@ -191,6 +193,8 @@ class Optimizer:
     references: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict)
     phase: str = "search"
+    #: counts the evaluations as they finish (a tqdm bar), or None
+    bar: object = None
 
     def __post_init__(self) -> None:
         # the next evaluation's index: after those recorded (a line deleted from the log leaves a gap)
@@ -215,6 +219,8 @@ class Optimizer:
                     self._score(record)
                     self.cache[self._key(record["x"])] = record
                     store.append(record)
+                    if self.bar is not None:
+                        self.bar.update(1)
         return [self.cache[self._key(x)] for x in xs]
 
     def _score(self, record: dict) -> None:

@@ -25,37 +25,39 @@ STEPS_PER_TOP = 10
 
 def register(commands) -> None:
     """``piezo-fmu random``."""
-    from ...options import engine, model_options, results_folder
+    from ...options import batch_options, model_options, results_options, shared, work_options
     from . import study
 
     sub = commands.add_parser(
-        "random", help="the damper under random base excitation: how much it takes away, and what it harvests",
+        "random", help="the damper under random base excitation",
         description="March --realizations realizations of stationary Gaussian base acceleration of a one-sided PSD "
                     "(band-limited white noise, Kanai-Tajimi or Clough-Penzien ground motion, or a table), or a "
                     "recorded acceleration, with and without the damper on the same input, on the batch engine; "
                     "discard the warm-up and report per level the RMS of the main mass's displacement (relative and "
-                    "absolute) with and without, their ratio with its 95%% interval (paired over the "
+                    "absolute) with and without, their ratio with its 95% interval (paired over the "
                     "realizations), the peaks, the impacts a second, V_rms and the harvested power. The FMU "
-                    "replays --confirm realizations. Writes random.nc/.csv, psd.csv, summary.json and four "
-                    "figures; chunks of realizations are appended to points.jsonl (--resume).")
+                    "replays --confirm realizations. Writes random.nc, random.csv, psd.csv, summary.json, "
+                    "effectiveness.png, psd.png, history.png and peaks.png (and input_K.csv, response_K.csv with "
+                    "--save-input K); chunks of realizations are appended to points.jsonl (--resume).")
     source = sub.add_mutually_exclusive_group()
     source.add_argument("--psd", default="kanai-tajimi", metavar="{white,kanai-tajimi,clough-penzien,FILE.csv}",
                         help="the PSD of the base acceleration: a kind, or a CSV table (frequency Hz, PSD (m/s^2)^2/Hz, "
-                             "interpolated log-log; default kanai-tajimi)")
+                             "interpolated log-log) (default kanai-tajimi)")
     source.add_argument("--record", type=str, default=None, metavar="FILE.csv",
                         help="a recorded base acceleration instead (time s, acceleration m/s^2, a uniform step): one "
                              "realization")
     levels = sub.add_mutually_exclusive_group()
     levels.add_argument("--level", type=float, default=None, metavar="G0",
-                        help=f"the PSD's level, one-sided, (m/s^2)^2/Hz: white noise's and the ground filters' G0, a "
+                        help="the PSD's level, one-sided, (m/s^2)^2/Hz: white noise's and the ground filters' G0, a "
                              f"table's largest value (default {DEFAULT_LEVEL:g}; a table as it is)")
     levels.add_argument("--levels", type=str, default=None, metavar="G1,G2,...",
                         help="several levels: the effectiveness curve (the same realizations, scaled)")
     sub.add_argument("--band", type=float, nargs=2, default=None, metavar=("FMIN", "FMAX"),
-                     help=f"Hz: white noise's band (default {DEFAULT_BAND[0]:g} {DEFAULT_BAND[1]:g}); for the ground "
-                          "filters and a table, 0 and the cut (default 25 Hz; a table's last frequency)")
+                     help="Hz: white noise's band; for the ground filters and a table, 0 and the cut (default "
+                          f"{DEFAULT_BAND[0]:g} {DEFAULT_BAND[1]:g} for white noise, 0 25 for the ground filters, a "
+                          "table's last frequency)")
     sub.add_argument("--soil", choices=("firm", "medium", "soft"), default="firm",
-                     help="the ground filters' preset (Kanai-Tajimi, Clough-Penzien; default firm)")
+                     help="the ground filters' preset (Kanai-Tajimi, Clough-Penzien) (default firm)")
     for option, metavar, text in (("--omega-g", "RAD/S", "the ground's frequency, rad/s (default the soil's)"),
                                   ("--zeta-g", "Z", "the ground's damping ratio (default the soil's)"),
                                   ("--omega-f", "RAD/S", "Clough-Penzien's high-pass frequency, rad/s (default the soil's)"),
@@ -67,14 +69,14 @@ def register(commands) -> None:
     sub.add_argument("--realizations", type=int, default=None, metavar="N",
                      help=f"realizations (default {study.DEFAULT_REALIZATIONS}; 1 with --record)")
     sub.add_argument("--duration", type=float, default=None, metavar="S",
-                     help=f"the window analysed, s, after the warm-up (default {study.DEFAULT_DURATION:g}; a record's "
-                          "length less the warm-up)")
+                     help="the window analysed, s, after the warm-up (default "
+                          f"{study.DEFAULT_DURATION:g}; a record's length less the warm-up)")
     sub.add_argument("--warmup", type=float, default=None, metavar="S",
                      help="the warm-up discarded, s (default: until the linear oscillator's transient variance is 0.1%% "
                           "of its stationary one, ln(1000) / (2 zeta w_n); 0 with --record)")
     sub.add_argument("--step", type=float, default=None, metavar="S",
-                     help=f"the input's step, s (default: {STEPS_PER_TOP} steps a period of the highest frequency; a "
-                          "record's own)")
+                     help=f"communication step, s (default {STEPS_PER_TOP} steps a period of the spectrum's highest "
+                          "frequency; a record's own)")
     sub.add_argument("--f-low", type=float, default=None, metavar="HZ",
                      help="the high-pass corner of the low-frequency treatment, Hz (default 0.1, or half the band's "
                           "start where lower)")
@@ -82,21 +84,14 @@ def register(commands) -> None:
                      help="write realization K's input at the first level as input_K.csv (time, base_displacement, "
                           "base_velocity at each step's start, as fmpy's input= takes them) and its response with the "
                           "damper as response_K.csv")
+    shared(sub, "--load")
     sub.add_argument("--voltage-model", type=int, default=None, metavar="N",
-                     help="0 quasi-static (nothing harvested) or 2 circuit coupled (default 2)")
-    sub.add_argument("--load", type=float, default=None, metavar="OHM",
-                     help="load R_load of each patch, Ohm (default 1/(omega_c C_p))")
-    sub.add_argument("--confirm", type=int, default=None, metavar="N",
-                     help=f"realizations marched through the FMU alone, drawn with --seed (the saved one first; "
-                          f"default {study.DEFAULT_CONFIRM})")
-    sub.add_argument("--seed", type=int, default=None, metavar="S",
-                     help="seed of the realizations' random numbers and of the FMU's sample (default 0)")
-    sub.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
-                     help="where the batch engine's compiled kernel runs: every CPU core (numba), or an NVIDIA GPU "
-                          "(numba's CUDA target, package numba-cuda; default cpu)")
+                     help="0 quasi-static (nothing harvested), 1 circuit one-way, 2 circuit coupled (default 2; "
+                          "this study takes 0 or 2)")
+    batch_options(sub, study.DEFAULT_CONFIRM)
     model_options(sub)
-    results_folder(sub, "random")
-    engine(sub)
+    results_options(sub, "random", resumable=True)
+    work_options(sub)
     sub.set_defaults(run=command)
 
 

@@ -198,7 +198,7 @@ def run(args) -> int:
             if not _march(spec, folder, done, start_over, model, backend, args.no_progress):
                 return 130
             marched = time.perf_counter() - begin
-            checks = [record for _, record in backend.run_tasks(study.check_tasks(spec))]
+            checks = _check(spec, backend, args.no_progress)
             checked = time.perf_counter() - begin - marched
         finally:
             backend.close()
@@ -221,9 +221,11 @@ def _march(spec: RandomSpec, folder, done: dict, start_over: bool, model, backen
     from ...store import PointStore
     from . import study
 
-    print(f"{PROG} random: {spec.realizations} realizations x {max(len(spec.levels), 1)} levels, with and without "
-          f"the damper, {spec.warmup:.3g} s of warm-up + {spec.duration:.3g} s, on the batch engine ({spec.device}), "
-          f"in chunks on {backend.description}", file=sys.stderr)
+    from ...wording import counted
+
+    print(f"{PROG} random: {counted(spec.realizations, 'realization')} x {counted(max(len(spec.levels), 1), 'level')}, "
+          f"with and without the damper, {spec.warmup:.3g} s of warm-up + {spec.duration:.3g} s, on the batch engine "
+          f"({spec.device}), in chunks on {backend.description}", file=sys.stderr)
     if start_over:
         PointStore(folder).clear()
     (folder / study.HEADER_FILE).write_text(json.dumps({**spec.to_dict(), "fmu_guid": model.guid}, indent=2) + "\n")
@@ -245,6 +247,25 @@ def _march(spec: RandomSpec, folder, done: dict, start_over: bool, model, backen
     return True
 
 
+def _check(spec: RandomSpec, backend, quiet: bool) -> list[dict]:
+    """The FMU's checks (:func:`.study.check_tasks`) on ``backend``, a progress bar counting them."""
+    from tqdm import tqdm
+
+    from . import study
+
+    tasks = study.check_tasks(spec)
+    bar = tqdm(total=len(tasks), unit="check", desc="random: FMU checks", dynamic_ncols=True,
+               disable=True if quiet or not tasks else None, file=sys.stderr)
+    checks = []
+    try:
+        for _, record in backend.run_tasks(tasks):
+            checks.append(record)
+            bar.update(1)
+    finally:
+        bar.close()
+    return checks
+
+
 def _say(spec: RandomSpec, report: dict, folder) -> None:
     from ...checks import PROG
 
@@ -256,7 +277,10 @@ def _say(spec: RandomSpec, report: dict, folder) -> None:
               f"{entry['without']['rms_relative'] * 1e3:.3g} mm without: ratio {entry['ratio']:.3f} "
               f"({entry['ratio_ci'][0]:.3f}-{entry['ratio_ci'][1]:.3f}); {entry['with']['impacts_per_second']:.3g} "
               f"impacts/s, {entry['with']['power'] * 1e3:.3g} mW harvested")
-    agree = sum(1 for check in report["fmu_checks"] if check["agrees"])
-    print(f"  the FMU, marched alone on {len(report['fmu_checks'])} of the realizations: agrees on {agree} (its motion "
-          "within 1e-9 m over the first second, its RMS and impacts within the realizations' scatter)")
+    from ...wording import counted
+
+    agree = sum(1 for check in report["fmu_checks"]["checks"] if check["agrees"])
+    print(f"  the FMU, marched alone on {counted(len(report['fmu_checks']['checks']), 'realization')}: agrees on "
+          f"{agree} (its motion within 1e-9 m over the first second, its RMS and impacts within the realizations' "
+          "scatter)")
     print(f"  results in {folder}")
