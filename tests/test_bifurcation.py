@@ -1,4 +1,4 @@
-"""The bifurcation diagram (issues 23, 27, 31): section samples and impacts per cycle, up and down, on
+"""The bifurcation diagram: section samples and impacts per cycle, up and down, on
 the batch engine, a point called chaotic only where its motion persists (shown through the FMU too:
 it persists over a march twice the budget and parts from a neighbour start at a positive rate), a
 sample of points checked through the FMU; bad input refused before any run."""
@@ -88,7 +88,7 @@ def test_the_fmu_checked_every_kind_of_motion_the_diagram_shows_and_none_disagre
 
 
 def test_a_point_called_chaotic_persists_twice_the_budget_and_parts_from_a_neighbour_through_the_fmu(diagram):
-    """Issue 31: chaos is a claim that needs evidence. Every chaotic point's cloud persisted and its
+    """Chaos is a claim that needs evidence. Every chaotic point's cloud persisted and its
     exponent's interval lies above 0; through the FMU marched with fmpy alone from the point's start,
     the motion never settles over twice the budget, and a start moved by 1e-9 of itself (of ``Y``
     in both displacements for a start at rest) parts from it at a positive rate, to the motion's own
@@ -153,7 +153,7 @@ def persistence(*argv) -> tuple[int, dict]:
 
 
 def test_every_point_called_chaotic_persists_under_a_march_twice_as_long(diagram):
-    """Issue 31's check of a run, by ``tools/persistence.py``: each chaotic point's own trajectory,
+    """The check of a run by ``tools/persistence.py``: each chaotic point's own trajectory,
     marched again from its start for twice the budget, still reaches no orbit."""
     status, report = persistence(diagram)
     (folder,) = report["folders"]
@@ -216,7 +216,7 @@ def test_the_diagram_takes_every_worker_it_is_given(tmp_path, monkeypatch):
 @pytest.mark.parametrize("quiet", [False, True])
 def test_the_sweeps_show_a_progress_bar_unless_told_not_to(tmp_path, capsys, monkeypatch, quiet):
     """A frequency a task: on a terminal, the bar counts the points of both sweeps as they are done
-    (issue 32); ``--no-progress`` silences it."""
+   ; ``--no-progress`` silences it."""
     argv = ["--ratio-min", 1.1, "--ratio-max", 1.2, "--count", 2, "--max-cycles", 40, "--confirm", 0, "--jobs", 1,
             "--out", tmp_path] + (["--no-progress"] if quiet else [])
     capsys.readouterr()

@@ -1,4 +1,4 @@
-"""Continuation through folds (issue 23): the branches of the forced response's orbits, their
+"""Continuation through folds: the branches of the forced response's orbits, their
 folds against the sweeps' jumps, and unstable branches against what a disturbed run does."""
 
 from __future__ import annotations

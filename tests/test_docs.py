@@ -1,4 +1,4 @@
-"""The documentation (issue 14): the site builds in strict mode, the API reference covers every
+"""The documentation: the site builds in strict mode, the API reference covers every
 module, the README's links lead somewhere, and the example both pages show runs and prints what
 they say it prints.
 """

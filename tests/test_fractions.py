@@ -1,8 +1,8 @@
-"""Basin fractions across a band (issues 26, 31): at each frequency the share of random starts that
+"""Basin fractions across a band: at each frequency the share of random starts that
 reach each attractor, adding to 1, with names kept across the band, and the share the budget left
 undecided, never folded into an attractor; every attractor and a random sample of starts checked by
-the FMU marched with fmpy alone. The starts issue 31 found labelled chaotic at 1.25 w_n reach the
-two-impact orbit, in the study and through fmpy alone."""
+the FMU marched with fmpy alone. The starts a 600-period cap once labelled chaotic at 1.25 w_n
+reach the two-impact orbit, in the study and through fmpy alone."""
 
 from __future__ import annotations
 
@@ -86,7 +86,7 @@ def test_every_attractor_across_the_band_and_a_start_at_every_frequency_was_chec
 
 def test_the_budget_left_undecided_starts_undecided_with_the_transients_measured(fractions, summary):
     """At 1.25 w_n a budget of 1000 periods leaves starts on their chaotic transients: they are
-    undecided (issue 31), never chaotic, and the survival fit shows no plateau; the dataset says the
+    undecided, never chaotic, and the survival fit shows no plateau; the dataset says the
     undecided share, the lifetime with its interval and the survival curve."""
     ds = open_dataset(fractions / "fractions.nc")
     names = [str(n) for n in ds["attractor_name"].values]
@@ -133,7 +133,7 @@ def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_u
         marcher.close()
 
 
-#: Starts of the seed-0 draw at 1.25 w_n that a 600-period cap left "chaotic" (issue 31). Their
+#: Starts of the seed-0 draw at 1.25 w_n that a 600-period cap left "chaotic". Their
 #: chaotic transients are not the batch engine's (they part in the last bits), and their lengths hang
 #: on the CPU type too: numpy's AVX-512 loops and OpenBLAS's kernels move the FMU's last bits. On
 #: CPUs without AVX-512 the FMU's trajectories make two impacts every period from periods 427, 1274,

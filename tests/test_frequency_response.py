@@ -1,4 +1,4 @@
-"""The frequency response (issue 13): steady states under harmonic base motion, through the FMU.
+"""The frequency response: steady states under harmonic base motion, through the FMU.
 
 The linear limit is checked against the closed form of the base-excited oscillator; the
 steady-state detection against a known periodic orbit and a case that cannot settle; the two

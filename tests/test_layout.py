@@ -3,15 +3,15 @@
 - Imports run one way: ``piezo_fmu.build`` may import the FMI layer, ``piezo_fmu.fmi`` the solver and
   the model, the solver the model, and the model neither; the harness never imports the core, but
   for the studies of many starts (basins, fractions, the bifurcation diagram), which import the
-  batch engine ``piezo_fmu.solver.batch`` and nothing else of it (issue 27).
-- ``piezo_fmu.fmi`` holds only what ships inside the FMUs (issue 22): every module there is a slave
+  batch engine ``piezo_fmu.solver.batch`` and nothing else of it.
+- ``piezo_fmu.fmi`` holds only what ships inside the FMUs: every module there is a slave
   script or lies under the FMUs' ``resources/``, and what builds the FMUs is in ``piezo_fmu.build``.
 - No import cycle between modules, inside the package or the harness (lazy imports in functions
   count too).
 - No module over 400 lines, no class over 250.
 - No file of the project points at the team's folder beside the clone (``..`` then ``shared``): a
   user's clone has no such folder.
-- The harness is arranged by study (issue 22): each study is a module or package under
+- The harness is arranged by study: each study is a module or package under
   ``piezo_fmu_harness.studies``; the studies never import each other, and the infrastructure (the
   rest of the package) never imports a study; the CLI only collects the studies' subcommands.
 """

@@ -1,4 +1,4 @@
-"""The harness's load sweep and single-impact voltages (issue 7), through the FMU with fmpy.
+"""The harness's load sweep and single-impact voltages, through the FMU with fmpy.
 
 References are direct fmpy runs of the same FMU; short durations and few loads keep it fast.
 """

@@ -1,4 +1,4 @@
-"""``make nominal`` needs only python3 (issue 28): no system package manager, no root, no C
+"""``make nominal`` needs only python3: no system package manager, no root, no C
 compiler, no Wine.
 
 - ``make -n nominal`` calls no system package manager (no apt, apt-get, dpkg, sudo, nothing of

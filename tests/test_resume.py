@@ -1,4 +1,4 @@
-"""``--resume`` on a damaged results folder (issue 53): every study that resumes (sweep, load-sweep,
+"""``--resume`` on a damaged results folder: every study that resumes (sweep, load-sweep,
 frequency-response, continuation, bifurcation, optimize, basins, fractions), each run once at its
 smallest, then resumed from a copy of its folder with one line spoiled. A line that is not JSON, a record without the study's
 fields, or a record of another run stops the run with exit status 2 and one line naming the file,

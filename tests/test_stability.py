@@ -1,4 +1,4 @@
-"""Only stable orbits are the response (issue 20): the Floquet multipliers of the frequency
+"""Only stable orbits are the response: the Floquet multipliers of the frequency
 response's orbits, checked against the closed form of the linear oscillator and against what a
 perturbed run does, and the stability of every orbit the frequency response reports.
 

@@ -52,8 +52,8 @@ METRIC_UNITS = {
 #: End-of-run outputs (J) a point's record also carries when the FMU declares them: the energy
 #: harvested in the loads (voltage_model 1 and 2), in total and per barrier.
 ENERGY_OUTPUTS = ("harvested_energy", "harvested_energy_left", "harvested_energy_right")
-#: Metrics a point's record also carries when the FMU declares them (FMUs built before issue 13
-#: lack them), under the harness's names: the robust damping inclination DI_ls (m/s).
+#: Metrics a point's record also carries when the FMU declares them (older FMUs lack them), under the
+#: harness's names: the robust damping inclination DI_ls (m/s).
 OPTIONAL_METRICS = {"DI_ls": "damping_inclination_ls"}
 
 

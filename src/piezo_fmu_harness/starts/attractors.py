@@ -10,7 +10,7 @@ one list per drive (``group``):
   states agree (a point of one within :data:`SAME` of ``Y`` of a point of the other): an
   asymmetric orbit and its mirror image stay two attractors;
 - the motion without impacts is one attractor per drive (the family where the impact mass rests);
-- the starts that reach no orbit within the budget of periods (issue 31) are **undecided**, never
+- the starts that reach no orbit within the budget of periods are **undecided**, never
   folded into an attractor, unless the drive's survival curve shows that what is left persists
   (:func:`piezo_fmu_harness.starts.transients.escape`: a plateau, the transient died out, the
   curve flat at its end). Then a start is **chaotic** when its largest Lyapunov exponent is positive

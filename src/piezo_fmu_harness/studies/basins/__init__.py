@@ -1,4 +1,4 @@
-"""Basins of attraction (issues 23, 26, 27): a grid of starts at one frequency, each marched to the
+"""Basins of attraction: a grid of starts at one frequency, each marched to the
 motion it reaches, and the share of the starts each motion takes (``piezo-fmu basins --ratio R``).
 
 - :mod:`.study`: the starts on the batch engine, in chunks on the sweep engine, the attractors,

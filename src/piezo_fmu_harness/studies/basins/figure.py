@@ -1,5 +1,5 @@
 """``basins.png``: the attractor each start ends on, over the grid of starts, and beside it the
-transient's length: the periods each start took to reach its motion (issue 31; the budget where it
+transient's length: the periods each start took to reach its motion (the budget where it
 was left undecided), on a log scale: where the machine settles fast and where it rattles first."""
 
 from __future__ import annotations

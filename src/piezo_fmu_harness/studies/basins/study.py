@@ -1,4 +1,4 @@
-"""Basins of attraction (issues 23, 26, 27): which motion the machine reaches from where it starts,
+"""Basins of attraction: which motion the machine reaches from where it starts,
 at one frequency.
 
 A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the middle of the gap
@@ -6,7 +6,7 @@ A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the 
 engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (the rule of
 ``piezo_fmu.solver.batch.attractors.settle``): a stable orbit it is seen converging to, with its impact
 sequence, the motion without impacts once it provably never reaches a barrier again, or, after
-the budget of ``--max-cycles`` periods, **undecided** (issue 31: a cap is a budget, not a
+the budget of ``--max-cycles`` periods, **undecided** (a cap is a budget, not a
 verdict), unless the map's survival curve shows that what is left persists and the start's own
 exponent says chaotic or quasi-periodic (:func:`piezo_fmu_harness.starts.attractors.merge`). The
 periods each start took are the transient's length, mapped beside the basins. The grid is split into chunks

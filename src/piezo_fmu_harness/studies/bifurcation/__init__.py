@@ -1,4 +1,4 @@
-"""The bifurcation diagram (issues 23, 27): the section samples of ``p`` and the impacts per cycle
+"""The bifurcation diagram: the section samples of ``p`` and the impacts per cycle
 against frequency, swept up and down on the batch engine, every motion that does not settle
 classified, a sample checked through the FMU (``piezo-fmu bifurcation``).
 

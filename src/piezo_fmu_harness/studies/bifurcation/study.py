@@ -1,4 +1,4 @@
-"""The bifurcation diagram (issues 23, 27): at each frequency, after the transients, the Poincare
+"""The bifurcation diagram: at each frequency, after the transients, the Poincare
 (stroboscopic) samples of the main mass's displacement ``p`` and the impacts per cycle, swept up and
 down in frequency with the damper.
 
@@ -10,7 +10,7 @@ orbit within the budget ``--max-cycles`` gives the samples of its measuring wind
 :data:`SAMPLES` periods) and its class. The two sweeps are two chains of tasks of the sweep
 engine, a frequency a task, side by side (a progress bar follows them).
 
-**Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
+**Chaotic only when it persists**. One trajectory that has not reached an orbit when
 the budget runs out may be on a long chaotic transient. So each such point is marched again with a
 cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
 (random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud is

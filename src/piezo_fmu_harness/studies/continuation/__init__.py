@@ -1,4 +1,4 @@
-"""Continuation (issue 23): the branches of periodic orbits of the forced response, followed
+"""Continuation: the branches of periodic orbits of the forced response, followed
 through their folds by pseudo-arclength continuation, with their stability and bifurcations
 (``piezo-fmu continuation``).
 

@@ -1,4 +1,4 @@
-"""``piezo-fmu continuation`` (issue 23): the branches of periodic orbits of the forced response,
+"""``piezo-fmu continuation``: the branches of periodic orbits of the forced response,
 followed through their folds, with their stability and bifurcations.
 
 1. **Seeds.** A sweep up and a sweep down over ``--count`` values of the parameter (the frequency

@@ -1,4 +1,4 @@
-"""The forced response (issues 13 and 20): the damper shaken at its base, swept up and down in
+"""The forced response: the damper shaken at its base, swept up and down in
 frequency, with and without the damper, each frequency's response a stable orbit or a motion that
 is not periodic (``piezo-fmu frequency-response``).
 

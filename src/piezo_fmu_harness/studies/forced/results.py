@@ -71,7 +71,7 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
                                                                      "or missing"})
     variables["motion"] = (dims, motion.astype(str), {"long_name": "periodic (a stable orbit), undecided, "
                                                                    "or undecided (converging): its exponent says it "
-                                                                   "still contracts; never chaotic (issue 31)"})
+                                                                   "still contracts; never chaotic"})
     for part, values in (("real", multipliers.real), ("imag", multipliers.imag)):
         variables[f"multiplier_{part}"] = (dims + ("multiplier",), values,
                                            {"units": "1", "long_name": f"{part} part of the orbit's Floquet multipliers, "

@@ -1,4 +1,4 @@
-"""Global stability across a band (issue 26): at each frequency, the share of random starts that
+"""Global stability across a band: at each frequency, the share of random starts that
 reach each attractor (``piezo-fmu fractions``).
 
 - :mod:`.study`: the starts on the batch engine, frequencies in chunks on the sweep engine, the

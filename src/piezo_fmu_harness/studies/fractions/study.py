@@ -1,4 +1,4 @@
-"""Global stability across a band (issue 26): at each frequency, how likely each motion is.
+"""Global stability across a band: at each frequency, how likely each motion is.
 
 At each of ``--count`` frequencies from ``--ratio-min`` to ``--ratio-max`` times ``sqrt(K/M)``,
 ``--starts`` random starts are marched on the batch engine (``piezo_fmu.solver.batch``) to the
@@ -24,7 +24,7 @@ attractor across the band (by its name), the one that reached it soonest, and ``
 starts more (:mod:`piezo_fmu_harness.starts.fmu_checks`) are marched through the FMU, which must
 reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
 
-**A start ends where its trajectory ends** (issue 31). ``--max-cycles`` is a budget, not a
+**A start ends where its trajectory ends**. ``--max-cycles`` is a budget, not a
 verdict: a start not seen reaching an orbit within it is **undecided**, reported with its share,
 never folded into an attractor. At each frequency the survival curve of the starts (the share
 still unresolved after ``t`` periods) is fitted (:mod:`piezo_fmu_harness.starts.transients`):

@@ -1,4 +1,4 @@
-"""The transients of a fractions study (issue 31): at each frequency, how long the starts took to
+"""The transients of a fractions study: at each frequency, how long the starts took to
 reach their orbits, the share the budget left undecided, the mean transient lifetime with its 95%
 interval and the plateau (:func:`piezo_fmu_harness.starts.transients.escape`), and the survival
 curve; ``transients.png`` draws the lifetime over frequency and the survival curves of a few

@@ -1,4 +1,4 @@
-"""The load study (issue 7): the load sweep of the circuit voltage models and the voltage of
+"""The load study: the load sweep of the circuit voltage models and the voltage of
 one impact (``piezo-fmu load-sweep`` and ``piezo-fmu impact-voltage``).
 
 - :mod:`.sweep`: the load sweep and its optimum;

@@ -1,4 +1,4 @@
-"""The voltage of a single impact under each voltage model (issue 7), through the FMU with fmpy.
+"""The voltage of a single impact under each voltage model, through the FMU with fmpy.
 
 **Single impact** (``piezo-fmu impact-voltage``, and after a load sweep). The first impact of
 the run, sampled every microsecond (the FMU steps coarsely up to it: its events are exact

@@ -1,4 +1,4 @@
-"""The load of the circuit voltage models (issue 7): a load sweep through the FMU with fmpy.
+"""The load of the circuit voltage models: a load sweep through the FMU with fmpy.
 
 **Load sweep** (``piezo-fmu load-sweep``). ``R_load`` log-spaced over at least four decades, for
 ``voltage_model`` 1 (circuit, one-way) and 2 (circuit, coupled); each point is one run of the
