@@ -65,13 +65,21 @@ def paired_ratio(a, b) -> tuple[float, float, float]:
 
 def quantile_interval(values, q: float) -> tuple[float, float, float]:
     """``(value, low, high)``: the ``q`` quantile of ``values`` and the order statistics that bracket it
-    with at least 95% confidence (binomial; the extremes when there are too few values)."""
+    with at least 95% confidence (binomial; widened on one side where the other meets the extreme
+    value). Where even the smallest and the largest value bracket
+    it with less (too few values: a single record, or fewer than 59 for the 95th percentile), the
+    bounds are NaN: no interval, rather than one that claims more than it holds."""
     ordered = np.sort(np.asarray(values, float))
     n = len(ordered)
     value = float(np.quantile(ordered, q))
-    lo = int(stats.binom.ppf((1 - LEVEL) / 2, n, q))
-    hi = int(stats.binom.ppf(0.5 + LEVEL / 2, n, q))
-    return value, float(ordered[max(lo - 1, 0)]), float(ordered[min(hi, n - 1)])
+    first = max(int(stats.binom.ppf((1 - LEVEL) / 2, n, q)), 1)  # order statistics, counted from 1
+    last = min(int(stats.binom.ppf(0.5 + LEVEL / 2, n, q)) + 1, n)
+    coverage = lambda: stats.binom.cdf(last - 1, n, q) - stats.binom.cdf(first - 1, n, q)  # noqa: E731
+    while coverage() < LEVEL and (first > 1 or last < n):  # clamped at one end: widen the other
+        first, last = max(first - 1, 1), min(last + 1, n)
+    if coverage() < LEVEL:
+        return value, math.nan, math.nan
+    return value, float(ordered[first - 1]), float(ordered[last - 1])
 
 
 class Welch:

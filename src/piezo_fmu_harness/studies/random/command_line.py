@@ -266,6 +266,14 @@ def _check(spec: RandomSpec, backend, quiet: bool) -> list[dict]:
     return checks
 
 
+def _interval(bounds) -> str:
+    """A 95% interval as said, or why there is none (one realization cannot give one)."""
+    low, high = bounds
+    if low is None or high is None or not (math.isfinite(low) and math.isfinite(high)):
+        return " (no interval from one realization)"
+    return f" (95%: {low:.3f}-{high:.3f})"
+
+
 def _say(spec: RandomSpec, report: dict, folder) -> None:
     from ...checks import PROG
 
@@ -274,13 +282,13 @@ def _say(spec: RandomSpec, report: dict, folder) -> None:
         acc = entry.get("base_acceleration_rms")
         print(f"{PROG} random: {level}" + (f", RMS base acceleration {acc:.3g} m/s^2" if acc else "") +
               f": RMS relative displacement {entry['with']['rms_relative'] * 1e3:.3g} mm with the damper, "
-              f"{entry['without']['rms_relative'] * 1e3:.3g} mm without: ratio {entry['ratio']:.3f} "
-              f"({entry['ratio_ci'][0]:.3f}-{entry['ratio_ci'][1]:.3f}); {entry['with']['impacts_per_second']:.3g} "
+              f"{entry['without']['rms_relative'] * 1e3:.3g} mm without: ratio {entry['ratio']:.3f}"
+              f"{_interval(entry['ratio_ci'])}; {entry['with']['impacts_per_second']:.3g} "
               f"impacts/s, {entry['with']['power'] * 1e3:.3g} mW harvested")
     from ...wording import counted
 
     agree = sum(1 for check in report["fmu_checks"]["checks"] if check["agrees"])
     print(f"  the FMU, marched alone on {counted(len(report['fmu_checks']['checks']), 'realization')}: agrees on "
-          f"{agree} (its motion within 1e-9 m over the first second, its RMS and impacts within the realizations' "
-          "scatter)")
+          f"{agree} (its motion within 1e-9 m over the first second" +
+          (")" if spec.realizations < 2 else ", its RMS and impacts within the realizations' scatter)"))
     print(f"  results in {folder}")

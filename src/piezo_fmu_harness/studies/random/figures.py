@@ -29,15 +29,18 @@ def effectiveness(summary: dict, path: Path) -> Path:
         ratio = np.array([entry["ratio"] for entry in levels])
         low = np.array([entry["ratio_ci"][0] for entry in levels])
         high = np.array([entry["ratio_ci"][1] for entry in levels])
-        ax.errorbar(x, ratio, yerr=[ratio - low, high - ratio], fmt="o-", color="C0", capsize=3, ms=6,
-                    label="RMS ratio, relative displacement (95% interval)")
+        if np.isfinite(low).all() and np.isfinite(high).all():
+            ax.errorbar(x, ratio, yerr=[ratio - low, high - ratio], fmt="o-", color="C0", capsize=3, ms=6,
+                        label="RMS ratio, relative displacement (95% interval)")
+        else:  # one realization (a record): no interval to draw
+            ax.plot(x, ratio, "o-", color="C0", ms=6, label="RMS ratio, relative displacement (one realization)")
         ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
         ax.set_xscale("log" if len(x) > 1 and x.max() / x.min() > 5 else "linear")
         power = ax.twinx()
         watts = np.array([entry["with"]["power"] for entry in levels])
         power.plot(x, watts * 1e3, "s--", color="C3", ms=5, label="harvested power (right)")
         power.set_ylabel("mean harvested power, both loads (mW)", color="C3")
-        ax.set_ylim(0.0, max(1.1, float(np.nanmax(high)) * 1.05))
+        ax.set_ylim(0.0, max(1.1, float(np.max(np.where(np.isfinite(high), high, ratio))) * 1.05))
         handles = ax.get_legend_handles_labels()[0] + power.get_legend_handles_labels()[0]
         ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="lower right")
     ax.set_xlabel("RMS base acceleration (m/s²)")
