@@ -176,7 +176,7 @@ def _envelope(text) -> dict | None:
 
 
 def run(args) -> int:
-    from ...checks import PROG, device, engine_damper, open_model, preflight, worker_count
+    from ...checks import device, engine_damper, open_model, preflight, worker_count
     from ...fmu import discard
     from ...starts.chunks import backend_for
     from . import study

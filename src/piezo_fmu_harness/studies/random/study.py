@@ -107,7 +107,6 @@ def write(spec: RandomSpec, done: dict, checks: list[dict], folder: Path, timing
     load = spec.values["R_load"]
     summary = summarize(spec, done, load)
     frequencies, densities = psd(spec, done)
-    levels = max(len(spec.levels), 1)
     for k, entry in enumerate(summary["levels"]):
         if spec.source["kind"] == "record":  # its samples' RMS: a record has no spectrum to integrate
             entry["base_acceleration_rms"] = float(np.sqrt(np.mean(np.square(spec.source["acceleration"]))))
