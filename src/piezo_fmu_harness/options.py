@@ -40,9 +40,13 @@ SHARED = {
 RATIO = "as w / w_n, w_n = sqrt(K/M)"
 
 
-def shared(sub, option: str, **more) -> None:
-    """Add the shared ``option`` (:data:`SHARED`) to ``sub``."""
+def shared(sub, option: str, default: str = "", **more) -> None:
+    """Add the shared ``option`` (:data:`SHARED`) to ``sub``; ``default``, when given, states the
+    command's own default in place of the shared one (the voltage model of a study on the batch
+    engine, which carries no one-way circuit)."""
     kind, metavar, text = SHARED[option]
+    if default:
+        text = f"{text.rpartition(' (default')[0]} (default {default})"
     sub.add_argument(option, type=kind, default=None, metavar=metavar, help=text, **more)
 
 
@@ -132,13 +136,14 @@ def ratio_option(sub, note: str = "", **more) -> None:
                      + (f" (default {note})" if note else ""), **more)
 
 
-def band_options(sub, defaults: dict, newton: bool = True) -> None:
+def band_options(sub, defaults: dict, newton: bool = True, voltage_model: str = "") -> None:
     """The harmonic base motion, the band of frequencies and how each steady state is found
-    (Newton's iterations too, for the studies that shoot through the FMU)."""
+    (Newton's iterations too, for the studies that shoot through the FMU); ``voltage_model``
+    restates ``--voltage-model``'s default (:func:`shared`)."""
     drive_options(sub)
     frequency_options(sub, defaults)
     for option in ("--load", "--voltage-model", "--samples", "--tolerance"):
-        shared(sub, option)
+        shared(sub, option, voltage_model if option == "--voltage-model" else "")
     sub.add_argument("--cycles-per-frequency", type=int, default=None, metavar="N",
                      help="forcing periods simulated at most at one frequency: the search for its stable orbit, "
                           "Newton's runs and the checks of attraction and stability included; none found within "

@@ -8,149 +8,26 @@ import math
 import sys
 import time
 
-from . import DEFAULT_BAND, DEFAULT_LEVEL, PSD_KINDS, STEPS_PER_TOP
-from ...random_response.spec import RandomSpec, default_warmup
-
-#: The FMU's start state of every realization: at rest (the base too, ``y = 0``).
-START = {"p0": 0.0, "q0": 0.0, "dp0": 0.0, "dq0": 0.0}
-
-
-def _source(args) -> tuple[dict, tuple]:
-    """The excitation's kind and parameters, and its levels."""
-    from ...excitation import CLOUGH_PENZIEN_SOILS, KANAI_TAJIMI_SOILS, Record, TablePSD
-    from ...spec import UsageError
-
-    if args.record is not None:
-        if args.level is not None or args.levels is not None:
-            raise UsageError(f"--record {args.record}: a record has no level; allowed: --level or --levels with --psd")
-        try:
-            record = Record.from_csv(args.record)
-        except (OSError, ValueError) as error:
-            raise UsageError(f"--record {args.record}: {error}") from None
-        return {"kind": "record", "step": record.step, "acceleration": record.acceleration.tolist(),
-                "name": str(args.record)}, ()
-    if args.levels is not None:
-        try:
-            levels = tuple(float(text) for text in args.levels.split(","))
-        except ValueError:
-            raise UsageError(f"--levels {args.levels}: give levels as G1,G2,... ((m/s^2)^2/Hz, each > 0)") from None
-    else:
-        levels = (DEFAULT_LEVEL if args.level is None else args.level,)
-    bad = [g for g in levels if not (math.isfinite(g) and g > 0.0)]
-    if bad:
-        raise UsageError(f"--level(s) {bad[0]!r}: a one-sided PSD level must be a finite number > 0; allowed range "
-                         "(0, inf) (m/s^2)^2/Hz")
-    kind = args.psd
-    band = args.band
-    if kind == "white":
-        fmin, fmax = DEFAULT_BAND if band is None else band
-        return {"kind": "white", "fmin": fmin, "fmax": fmax}, levels
-    if band is not None and band[0] != 0.0:
-        raise UsageError(f"--band {band[0]:g} {band[1]:g}: the ground filters and a table start where they start; "
-                         "allowed: --band 0 FMAX (FMAX the cut, Hz); the low-frequency treatment is --f-low")
-    upper = 25.0 if band is None else band[1]
-    if kind in ("kanai-tajimi", "clough-penzien"):
-        preset = (KANAI_TAJIMI_SOILS if kind == "kanai-tajimi" else CLOUGH_PENZIEN_SOILS)[args.soil]
-        source = {"kind": kind, "omega_g": args.omega_g or preset[0], "zeta_g": args.zeta_g or preset[1],
-                  "upper": upper}
-        if kind == "clough-penzien":
-            source.update(omega_f=args.omega_f or preset[2], zeta_f=args.zeta_f or preset[3])
-        return source, levels
-    try:
-        table = TablePSD.from_csv(kind, upper=math.nan if band is None else upper)
-    except (OSError, ValueError) as error:
-        raise UsageError(f"--psd {kind}: {error}; allowed: one of {', '.join(PSD_KINDS)}, or a CSV table") from None
-    if args.level is None and args.levels is None:
-        levels = (table.level,)
-    return {"kind": "table", "frequencies": table.frequencies.tolist(), "densities": table.densities.tolist(),
-            "upper": table.upper, "name": str(kind)}, levels
-
-
-def _values(args, model, instance) -> dict:
-    from ...checks import assignments, load_value
-    from ...circuit import circuit_constants
-    from ...spec import UsageError
-
-    given = assignments(model, args.set)
-    values = {**model.defaults(), **given}
-    starts = {name: given[name] for name in START if given.get(name, 0.0) != 0.0}
-    if starts:
-        raise UsageError(f"--set {', '.join(f'{k}={v!r}' for k, v in starts.items())}: every realization starts from rest, "
-                         "with the base; allowed: 0 (or leave it out)")
-    values.update(START)
-    values["voltage_model"] = 2 if args.voltage_model is None else args.voltage_model
-    if values["voltage_model"] not in (0, 2):
-        raise UsageError(f"--voltage-model {values['voltage_model']}: the batch engine carries a patch's voltage only "
-                         "where it acts back on the barrier; allowed: 0 (quasi-static, nothing harvested) or 2 (the "
-                         "coupled circuit)")
-    if args.load is not None:
-        values["R_load"] = load_value(model, args.load, "--load")
-    elif "R_load" not in {text.split("=")[0].strip() for text in args.set}:
-        values["R_load"] = circuit_constants(instance, values)["R_opt_estimate_ohm"]
-    if not values["C"] > 0.0:
-        raise UsageError(f"--set C={values['C']!r}: without damping the main mass's response to a stationary input never "
-                         "settles (its variance grows without end); allowed range (0, inf) N.s/m")
-    return values
+from ...random_response.spec import RandomSpec
 
 
 def spec_of(args, model, instance) -> RandomSpec:
-    """The study the options ask for, every option checked."""
-    from ...checks import positive, whole
+    """The study the options ask for, every option checked (the excitation's options by
+    :mod:`piezo_fmu_harness.random_response.arguments`)."""
+    from ...checks import assignments, whole
+    from ...random_response.arguments import damper_values, excitation_spec
     from ...spec import UsageError
     from . import study
 
-    source, levels = _source(args)
-    values = _values(args, model, instance)
-    record = source["kind"] == "record"
-    if record:
-        step = source["step"]
-        if args.step is not None and abs(args.step - step) > 1e-6 * step:
-            raise UsageError(f"--step {args.step!r}: a record is marched at its own step, {step!r} s; allowed: "
-                             "that step (resample the record to another)")
-        realizations = whole(1 if args.realizations is None else args.realizations, "--realizations", 1, "")
-        if realizations != 1:
-            raise UsageError(f"--realizations {realizations}: a record is one realization; allowed: 1")
-    else:
-        top = source["fmax"] if source["kind"] == "white" else source["upper"]
-        step = positive(1.0 / (STEPS_PER_TOP * top) if args.step is None else args.step, "--step",
-                        "the input's step", "s")
-        realizations = whole(study.DEFAULT_REALIZATIONS if args.realizations is None else args.realizations,
-                             "--realizations", 1, "at least one realization")
-    try:
-        from ...random_response.spec import build_source
-        from ...excitation import Excitation
-        excitation = Excitation(build_source(source, levels[0] if levels else None), step=step, f_low=args.f_low)
-    except ValueError as error:
-        raise UsageError(f"--psd/--band/--step/--f-low: {error}") from None
-    f_low = excitation.f_low
-    if args.warmup is not None:
-        warmup = args.warmup
-        if not (math.isfinite(warmup) and warmup >= 0.0):
-            raise UsageError(f"--warmup {warmup!r}: allowed range [0, inf) s")
-    else:
-        warmup = 0.0 if record else default_warmup(values, f_low)
-    if args.duration is not None:
-        duration = positive(args.duration, "--duration", "the window analysed", "s")
-    elif record:
-        duration = len(source["acceleration"]) * step - warmup
-        if duration <= 0.0:
-            raise UsageError(f"--warmup {warmup:g}: the record lasts {len(source['acceleration']) * step:g} s; allowed: "
-                             "a warm-up shorter than the record")
-    else:
-        duration = study.DEFAULT_DURATION
-    if duration < 2.0 * step:
-        raise UsageError(f"--duration {duration:g}: the window must hold two steps of {step:g} s at least")
+    values = damper_values(args, model, instance, assignments(model, args.set))
+    spec = excitation_spec(args, values, "random")
     envelope = _envelope(args.envelope)
-    seed = whole(0 if args.seed is None else args.seed, "--seed", 0, "the seed is a whole number >= 0")
     confirm = whole(study.DEFAULT_CONFIRM if args.confirm is None else args.confirm, "--confirm", 0,
                     "the FMU's checks cannot be negative")
-    if confirm > realizations:
-        confirm = realizations
     save = args.save_input
-    if save is not None and not 0 <= save < realizations:
-        raise UsageError(f"--save-input {save}: no such realization; allowed range [0, {realizations - 1}]")
-    return RandomSpec(source, levels, values, realizations, float(duration), float(warmup), float(step), float(f_low),
-                      envelope, seed, args.device, confirm, save)
+    if save is not None and not 0 <= save < spec.realizations:
+        raise UsageError(f"--save-input {save}: no such realization; allowed range [0, {spec.realizations - 1}]")
+    return spec.with_(envelope=envelope, device=args.device, confirm=min(confirm, spec.realizations), save_input=save)
 
 
 def _envelope(text) -> dict | None:

@@ -37,8 +37,6 @@ from .results import MEASURES, arrays, psd, summarize, write_json
 from ...random_response.spec import RandomSpec
 
 HEADER_FILE = "random.json"
-#: Realizations a study marches by default, and the window (s) it analyses.
-DEFAULT_REALIZATIONS, DEFAULT_DURATION = 1000, 300.0
 #: The FMU's checks by default: realizations marched through it.
 DEFAULT_CONFIRM = 1
 
