@@ -1,6 +1,6 @@
-"""The documentation (issue 14): the site builds in strict mode, the API reference covers every
-module, the README's links lead somewhere, and the example both pages show runs and prints what
-they say it prints.
+"""The documentation: the site builds in strict mode, the API reference covers every module, the
+README's links lead somewhere, its table of the FMU's variables is the FMU's, and the example both
+pages show runs and prints what they say it prints.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ def test_the_site_builds_in_strict_mode_without_a_warning(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "WARNING" not in done.stderr, done.stderr
     assert (tmp_path / "site" / "index.html").is_file()
-    for page in ("model", "core", "fmu", "simulators", "harness", "validation", "crosscheck", "reliability",
-                 "benchmarks", "api/model", "api/solver", "api/fmi", "api/harness"):
+    for page in ("model", "core", "fmu", "simulators", "harness", "dynamics", "validation", "crosscheck",
+                 "reliability", "benchmarks", "contributing", "api/model", "api/solver", "api/fmi", "api/harness"):
         assert (tmp_path / "site" / page / "index.html").is_file(), page
     reference = (tmp_path / "site" / "api" / "harness" / "index.html").read_text()
     assert 'id="piezo_fmu_harness.fmus.path"' in reference  # generated from the docstring
@@ -84,3 +84,38 @@ def test_the_fmpy_example_runs_and_prints_what_the_pages_say(tmp_path):
     done = subprocess.run([sys.executable, "-c", example], cwd=tmp_path, capture_output=True, text=True, env=environ)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == expected
+
+
+def readme_variable_rows() -> list[tuple[list[str], str, list[str], list[str]]]:
+    """The rows of the README's table of variables: names, causality, units, defaults."""
+    section = (ROOT / "README.md").read_text().split("## The FMU's variables", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in section.splitlines():
+        if not line.startswith("| `"):
+            continue
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        names = re.findall(r"`([^`]+)`", cells[0])
+        units = [unit.strip() for unit in cells[2].split(",")]
+        defaults = [value.strip() for value in cells[3].split(",")] if cells[3] else []
+        rows.append((names, cells[1], units, defaults))
+    return rows
+
+
+def test_the_readme_table_of_variables_is_the_fmus():
+    from piezo_fmu.fmi.variables import VARIABLES
+
+    table = {spec.name: spec for spec in VARIABLES}
+    rows = readme_variable_rows()
+    assert len(rows) >= 15
+    listed = set()
+    for names, causality, units, defaults in rows:
+        assert len(units) == len(names), names
+        assert not defaults or len(defaults) == len(names), names
+        for k, name in enumerate(names):
+            spec = table[name]
+            assert spec.causality == causality, (name, causality)
+            assert units[k] == (spec.unit if spec.type == "Real" else "-"), (name, units[k])
+            if spec.causality in ("parameter", "input"):
+                assert float(defaults[k]) == spec.start, (name, defaults[k])
+            listed.add(name)
+    assert {spec.name for spec in VARIABLES if spec.causality == "input"} <= listed
