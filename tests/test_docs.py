@@ -119,3 +119,34 @@ def test_the_readme_table_of_variables_is_the_fmus():
                 assert float(defaults[k]) == spec.start, (name, defaults[k])
             listed.add(name)
     assert {spec.name for spec in VARIABLES if spec.causality == "input"} <= listed
+
+
+def test_the_derived_figures_the_pages_quote_are_the_codes():
+    """The constants of the nominal damper that several pages quote, computed from the code: the
+    optimal-load estimate, the patch's capacitance, the contact frequency, the frequency of the main
+    mass carrying the impact mass, the resonant amplitude of the main mass alone under 1 mm of base
+    motion, and the random study's warm-up."""
+    import math
+
+    from piezo_fmu import Damper, Parameters
+    from piezo_fmu_harness.random_response.spec import default_warmup
+
+    nominal = Parameters()
+    damper = Damper.of(nominal)
+    omega_c, c_p = damper.contact_frequency, damper.barrier.C_p
+    zeta = nominal.C / (2 * math.sqrt(nominal.K * nominal.M))
+    carried = math.sqrt(nominal.M / (nominal.M + nominal.m))
+    warmup = default_warmup({"M": nominal.M, "K": nominal.K, "C": nominal.C}, 0.1)
+    quoted = {
+        "README.md": [f"`sqrt(K/(M + m))` = {carried:.3f} `w_n`", f"{1e3 * 1e-3 / (2 * zeta):.0f} mm"],
+        "docs/harness.md": [f"`R_opt ~ 1/(omega_c C_p)` = {1e-6 / (omega_c * c_p):.2f} MOhm",
+                            f"`C_p` = {1e9 * c_p:.3f}",
+                            f"`omega_c` = {omega_c:.0f}", f"`sqrt(K/(M + m)) = {carried:.3f} w_n`",
+                            f"| {1e3 * 1e-3 / (2 * zeta):.1f} mm, stable", f"({warmup:.1f} s for the"],
+        "docs/core.md": [f"`omega_c` ({omega_c:.0f} rad/s", f"= {1e-6 / (omega_c * c_p):.2f} MOhm"],
+        "docs/model.md": [f"`w_n = {omega_c:.0f} rad/s`", f"| {1e-6 / (omega_c * c_p):.2f} MOhm |"],
+    }
+    for page, figures in quoted.items():
+        text = (ROOT / page).read_text()
+        missing = [figure for figure in figures if figure not in text]
+        assert not missing, (page, missing)
