@@ -119,6 +119,10 @@ def test_the_readme_table_of_variables_is_the_fmus():
                 assert float(defaults[k]) == spec.start, (name, defaults[k])
             listed.add(name)
     assert {spec.name for spec in VARIABLES if spec.causality == "input"} <= listed
+    words = {"three": 3, "four": 4, "five": 5, "six": 6, "seven": 7, "eight": 8, "nine": 9, "ten": 10}
+    more = re.search(r"(\w+) more outputs", (ROOT / "README.md").read_text())
+    unlisted = [spec.name for spec in VARIABLES if spec.causality == "output" and spec.name not in listed]
+    assert more and words[more.group(1)] == len(unlisted), unlisted
 
 
 def test_the_derived_figures_the_pages_quote_are_the_codes():
