@@ -26,7 +26,6 @@ from scipy import stats
 
 #: The intervals' level.
 LEVEL = 0.95
-_Z = float(stats.norm.ppf(0.5 + LEVEL / 2))
 
 
 def mean_interval(values) -> tuple[float, float, float]:
@@ -49,7 +48,8 @@ def rms_interval(mean_squares) -> tuple[float, float, float]:
 def paired_ratio(a, b) -> tuple[float, float, float]:
     """``(ratio, low, high)``: ``sqrt(mean(a) / mean(b))`` for the paired mean squares ``a`` and ``b`` (one
     pair a realization), with the delta method's interval of its log from the pairs' variances and
-    covariance."""
+    covariance, Student's quantile for ``n - 1`` degrees of freedom in place of the normal one (the
+    same for a thousand pairs; honest for a few)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     n = len(a)
     ma, mb = float(a.mean()), float(b.mean())
@@ -59,7 +59,7 @@ def paired_ratio(a, b) -> tuple[float, float, float]:
     cov = np.cov(a, b, ddof=1)
     # var(log(ma / mb)) = var(ma)/ma^2 - 2 cov/(ma mb) + var(mb)/mb^2; the log of the RMS ratio is half of it
     var = (cov[0, 0] / ma**2 - 2.0 * cov[0, 1] / (ma * mb) + cov[1, 1] / mb**2) / n
-    half = 0.5 * _Z * math.sqrt(max(var, 0.0))
+    half = 0.5 * float(stats.t.ppf(0.5 + LEVEL / 2, n - 1)) * math.sqrt(max(var, 0.0))
     return ratio, ratio * math.exp(-half), ratio * math.exp(half)
 
 

@@ -1,14 +1,15 @@
 """The check of a study of many starts through the FMU: a sample of its starts, each marched through
 the FMU (:func:`.destination.fmu_label`) as a task of the sweep engine, on every worker.
 
-**The sample**, in proportion to the study (a check marches a start through the FMU, some 60 to 200
-times slower than the batch engine marches it): one start of **every attractor** of the study,
+**The sample**, in proportion to the study (a check marches a start through the FMU, about 1,000
+times slower than the batch engine marches one trajectory): one start of **every attractor** of the study,
 across its band (an attractor keeps its name across the band), chaotic and quasi-periodic ones
 included: the start that reached it soonest, and the next one (up to three) while the FMU has not
 agreed on one of its starts; and ``--confirm`` starts more drawn at random with ``--seed``, one a
 frequency (drawn at random too) until every frequency has one, then a second at each, and so on.
-The undecided starts claim nothing (no attractor) and are not checked. The defaults keep the
-checking within the marching time (docs/harness.md gives the measurements).
+The undecided starts claim nothing (no attractor) and are not checked. What the checks cost beside
+the marching, study by study, is in docs/harness.md (``checking_s`` and ``marching_s`` of each
+``summary.json``).
 
 A check **agrees** when the FMU's trajectory reaches the attractor the study gave the start; it
 **parted** when the answers differ but the FMU's sections had left the study's (passed as

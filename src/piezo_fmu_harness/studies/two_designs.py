@@ -112,11 +112,17 @@ def markdown_table(result: dict) -> str:
         *rows,
         "",
         "DI is eq. 29 (first two positive maxima of the main mass); V_rms is eq. 30 over the completed impacts.",
-        "Absolute voltages from eqs. 25-28 with Table 1 come out one to two orders of magnitude above the",
-        "paper's few volts (docs/model.md section 8: its unit handling is not recoverable); DI and the ratios",
-        "between the designs are the comparable part.",
+        f"Absolute voltages from eqs. 25-28 with Table 1 come out {_voltage_factors(d)} times the paper's",
+        "(docs/model.md section 8: its unit handling is not recoverable); DI and the ratios between the",
+        "designs are the comparable part.",
         "",
     ])
+
+
+def _voltage_factors(designs: dict) -> str:
+    """Our V_rms over the paper's, the smallest and the largest over the designs, as said."""
+    factors = sorted(design["ours"]["V_rms_V"] / design["paper"]["V_rms_V"] for design in designs.values())
+    return f"{factors[0]:.0f}" if round(factors[0]) == round(factors[-1]) else f"{factors[0]:.0f} to {factors[-1]:.0f}"
 
 
 def summary_lines(result: dict) -> list[str]:

@@ -115,8 +115,10 @@ def write(spec: RandomSpec, done: dict, checks: list[dict], folder: Path, timing
         entry["without"]["rms_relative_linear"] = math.sqrt(oracle.relative_displacement_variance(
             excitation, spec.values["M"], spec.values["K"], spec.values["C"]))
     data = arrays(spec, done)
-    spread = None if spec.realizations < 2 else {"rms_relative": float(np.nanstd(data["rms_relative"][0, :, 0], ddof=1)),
-                                                 "impacts": float(np.nanstd(data["impacts"][0, :, 0], ddof=1))}
+    finite = int(np.isfinite(data["rms_relative"][0, :, 0]).sum())
+    spread = None if finite < 2 else {"rms_relative": float(np.nanstd(data["rms_relative"][0, :, 0], ddof=1)),
+                                      "impacts": float(np.nanstd(data["impacts"][0, :, 0], ddof=1)),
+                                      "count": finite}
     checks = [verdict(check, spread) for check in checks]
     _write_dataset(spec, data, frequencies, densities, folder / "random.nc")
     _write_csv(summary, folder / "random.csv")

@@ -11,6 +11,7 @@ same input, ``base_displacement`` and ``base_velocity`` set at each step's start
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -97,25 +98,37 @@ def check_task(instance, spec_dict: dict, realization: int, level: int) -> dict:
 
 #: The FMU and the batch engine have parted where their main masses are farther apart (m).
 PART = 1e-9
-#: Standard deviations of the difference of two realizations' window measures within which the FMU's
-#: and the engine's lie, once parted.
+#: The two-sided level of the window's judgement: that of three standard deviations of a normal
+#: variable (99.73%).
 SPREADS = 3.0
+
+
+@functools.lru_cache(maxsize=None)
+def spread_factor(count: int) -> float:
+    """The multiple of a difference's estimated standard deviation within which it lies at the level
+    of :data:`SPREADS` normal deviations, the deviation estimated from ``count`` realizations:
+    Student's ``t`` with ``count - 1`` degrees of freedom (3.01 for 1,000; 236 for 2, where two
+    values say almost nothing of the scatter)."""
+    from scipy import stats
+
+    return float(stats.t.ppf(stats.norm.cdf(SPREADS), count - 1))
 
 
 def verdict(check: dict, spread: dict | None) -> dict:
     """``check`` (:func:`check_task`'s) with its verdict: it **agrees** when the FMU follows the batch
-    engine within :data:`PART` over the first second and its RMS and impacts over the window lie
-    within :data:`SPREADS` ``sqrt(2)`` standard deviations of the realizations' own (``spread``:
-    ``rms_relative`` (m) and ``impacts``, at that level with the damper; None for a study of one
-    realization, a record, whose window is then not judged) of the engine's. Once the two have parted
-    (the impacts make the motion chaotic, and rounding decides an impact's timing), they are two
-    trajectories of the same input, whose window measures differ by no more than two realizations'
-    do (a standard deviation of ``sqrt(2)`` theirs); an engine or an FMU that moved otherwise would
-    part at once."""
+    engine within :data:`PART` over the first second and its RMS and impacts over the window differ
+    from the engine's by no more than :func:`spread_factor` times ``sqrt(2)`` standard deviations
+    of the realizations' own (``spread``: ``rms_relative`` (m) and ``impacts``, at that level with
+    the damper, and ``count``, the realizations they come from; None for a study of one
+    realization, a record, whose window is then not judged). Once the two have parted (the impacts
+    make the motion chaotic, and rounding decides an impact's timing), they are two trajectories of
+    the same input, whose window measures differ as two realizations' do (a standard deviation of
+    ``sqrt(2)`` theirs); an engine or an FMU that moved otherwise would part at once."""
     close = check["largest_gap_first_second_m"] <= PART
     if spread is None:
         return {**check, "agrees": bool(close), "tolerance_rms_relative_m": None, "tolerance_impacts": None}
-    tolerance = {name: SPREADS * math.sqrt(2.0) * value for name, value in spread.items()}
+    factor = spread_factor(spread["count"]) * math.sqrt(2.0)
+    tolerance = {name: factor * spread[name] for name in ("rms_relative", "impacts")}
     same = abs(check["rms_relative_fmu"] - check["rms_relative_engine"]) <= tolerance["rms_relative"] and \
         abs(check["impacts_fmu"] - check["impacts_engine"]) <= tolerance["impacts"]
     return {**check, "agrees": bool(close and same), "tolerance_rms_relative_m": tolerance["rms_relative"],
