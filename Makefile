@@ -48,16 +48,16 @@ system-deps:
 # FMU with fmpy. No system package manager: see system-deps for what `make test` adds.
 nominal: $(STAMP)
 	@$(BIN)/python -m piezo_fmu.build
-	@$(BIN)/piezo-fmu nominal
+	@$(BIN)/piezo-fmu nominal --force
 
 sweep: $(STAMP)
 	$(BIN)/piezo-fmu sweep --preset figs4-9 --force
 
 two-designs: $(STAMP)
-	$(BIN)/piezo-fmu two-designs
+	$(BIN)/piezo-fmu two-designs --force
 
 load-sweep: $(STAMP)
-	$(BIN)/piezo-fmu load-sweep
+	$(BIN)/piezo-fmu load-sweep --force
 
 frequency-response: $(STAMP)
 	$(BIN)/piezo-fmu frequency-response --force

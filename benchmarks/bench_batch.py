@@ -158,9 +158,9 @@ def studies(jobs: int) -> dict:
             timed[name] = {"wall_s": time.perf_counter() - begin, "exit_status": status,
                            "summary": json.loads((Path(out) / "summary.json").read_text()) if status == 0 else None}
             summary = timed[name]["summary"] or {}
-            # the study's own figures: the marching alone (the bifurcation's wall_s is its sweeps), and
-            # with the FMU's checks
-            timed[name]["marching_wall_s"] = summary.get("marching_wall_s", summary.get("wall_s"))
+            # the study's own figures: the marching, the FMU's checks, and in all
+            timed[name]["marching_s"] = summary.get("marching_s")
+            timed[name]["checking_s"] = summary.get("checking_s")
             timed[name]["summary_wall_s"] = summary.get("wall_s")
             timed[name]["fmu_checks"] = {k: v for k, v in summary.get("fmu_checks", {}).items()
                                          if k in ("checked", "agree", "parted", "disagree")}

@@ -10,7 +10,7 @@ the pieces of ``settle`` that run between two blocks of marching. The run is the
 the same ``points.json`` as without the timers (the test checks it). The batch engine is the
 FMU's copy (as for the command): ``--fmu`` names another build, to compare two side by side.
 
-Prints one JSON object: ``sweeps_s`` (the sweeps' wall, as ``summary.json``'s ``wall_s``),
+Prints one JSON object: ``sweeps_s`` (the sweeps' wall, as ``summary.json``'s ``marching_s``),
 ``kernel_s`` (every launch of the kernel: the marching, and Newton's, the checks' and the
 measures' small ensembles), ``rest_s`` (the rest), ``kernel_share``, ``pieces`` (each piece's own
 Python, its kernel launches left out: Newton, the verification and the multipliers of the orbits
@@ -94,10 +94,10 @@ def instrument(timers: Timers) -> None:
 def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = True, fmu: Path | None = None) -> dict:
     """The diagram's sweeps, timed (see the module's text); ``timed`` False runs it bare."""
     from piezo_fmu_harness.cli import main
-    from piezo_fmu_harness.studies.bifurcation import study
+    from piezo_fmu_harness.studies.bifurcation import chains
 
     timers = Timers()
-    run = study.run
+    run = chains.run
 
     def instrumented_run(*args, **kwargs):
         from piezo_fmu.solver.batch import kernel
@@ -106,8 +106,8 @@ def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = 
             instrument(timers)
         return run(*args, **kwargs)
 
-    study.run, checks = instrumented_run, study.checks
-    study.checks = lambda *args, **kwargs: []  # the FMU's checks come after the sweeps
+    chains.run, checks = instrumented_run, chains.checks
+    chains.checks = lambda *args, **kwargs: []  # the FMU's checks come after the sweeps
     argv = ["bifurcation", "--jobs", "1", "--out", str(out), "--force", "--no-progress"]
     argv += [] if count is None else ["--count", str(count)]
     argv += [] if max_cycles is None else ["--max-cycles", str(max_cycles)]
@@ -116,17 +116,17 @@ def measure(count: int | None, max_cycles: int | None, out: Path, timed: bool = 
         with contextlib.redirect_stdout(sys.stderr):  # the command's lines; stdout is the JSON's
             code = main(argv)
     finally:
-        study.run, study.checks = run, checks
+        chains.run, chains.checks = run, checks
     if code != 0:
         raise SystemExit(code)
     summary = json.loads((out / "summary.json").read_text())
     if not timed:
-        return {"sweeps_s": summary["wall_s"], "start_periods": summary["start_periods"]}
+        return {"sweeps_s": summary["marching_s"], "start_periods": summary["start_periods"]}
     return report(timers, summary)
 
 
 def report(timers: Timers, summary: dict) -> dict:
-    seconds, sweeps = timers.seconds, summary["wall_s"]
+    seconds, sweeps = timers.seconds, summary["marching_s"]
     kernel = sum(v for k, v in seconds.items() if k.startswith("kernel"))
     own = {}
     for _, qualified in PIECES:

@@ -1,4 +1,4 @@
-"""Long run (issue 6): harmonic base excitation for 1e5 impacts, in the core or through the FMU.
+"""Long run: harmonic base excitation for 1e5 impacts, in the core or through the FMU.
 
     .venv/bin/python benchmarks/long_run.py                      # the core, 100 000 impacts
     .venv/bin/python benchmarks/long_run.py --impacts 20000      # shorter

@@ -8,17 +8,21 @@
  * and writes every output to a CSV file in the FMI cross-check format ("time" first, quoted
  * names, %.17g so that every double is written exactly).
  *
- *   native_host FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV]
- *                               [--set NAME=VALUE]... [--refusals] [--threads N] [--also FMU_DIR2]
+ *   native_host FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--clock ns|multiply] [--in IN_CSV]
+ *                               [--set NAME=VALUE]... [--every N] [--refusals] [--threads N] [--also FMU_DIR2]
  *
  * FMU_DIR  the FMU archive extracted (modelDescription.xml, binaries/, resources/).
  * --stop   stop time in s (default: DefaultExperiment stopTime, else 1).
- * --step   communication step in s (default: 1e-3). It is rounded to whole nanoseconds.
- * --start  start time in s (default 0).
+ * --step   communication step in s (default: 1e-3). It is rounded to whole nanoseconds (--clock ns).
+ * --start  start time in s (default 0); rounded to whole nanoseconds (--clock ns).
+ * --clock  the host's time arithmetic: ns (default), libcosim's grid below; multiply, the plain
+ *          fixed-step loop t_k = start + k * step, each step DoStep(t_k, step), nothing rounded.
  * --in     input CSV ("time" first, then one column per input, by name); values between two
  *          rows are linearly interpolated (FMI cross-check rules); a row at the exact grid time
  *          is used as it is.
  * --set    a start value for a parameter or input, by name (Real/Float64 or Integer/Int32).
+ * --every N  a row of output every N steps (and after the last), not after every step: a long
+ *          run reads its outputs, through the FMU's Python, only where they are written.
  * --refusals  before the run, make every call the project's FMU must refuse (check_refusals)
  *          and require Error from each, then fmi2Reset / fmi3Reset: the run is then that of the
  *          same instance after its reset.
@@ -28,10 +32,10 @@
  *          one model, say), loaded into the same process before either is instantiated; the
  *          same case then runs on it after the first, writing OUT_CSV.also.
  *
- * The communication grid is the one of OSP libcosim, which counts time in integer nanoseconds:
- * t_k = start + (k * step_ns) / 1e9 (the double nearest to k * step), and the step passed to
- * DoStep is t_{k+1} - t_k. The inputs of step k are those at t_k; they are set before DoStep.
- * Row k of the output is read after the step to t_k.
+ * By default the communication grid is the one of OSP libcosim, which counts time in integer
+ * nanoseconds: t_k = (start_ns + k * step_ns) / 1e9 (the double nearest to start + k * step), and
+ * the step passed to DoStep is t_{k+1} - t_k. The inputs of step k are those at t_k; they are set
+ * before DoStep. Row k of the output is read after the step to t_k (with --every N, every N-th).
  *
  * Any call that returns a status other than OK is an error: the host says which call and which
  * status, and exits with status 1 (so does an FMI 3.0 step that asks to terminate). The FMU's
@@ -712,10 +716,17 @@ typedef struct {
     const char *const *sets;
     int nsets;
     const InputTable *inputs;
-    double start, stop;
+    double start, stop, step;
     long long step_ns, nsteps;
-    int refusals;
+    long long every;
+    int refusals, multiply; /* multiply: --clock multiply (t_k = start + k * step), else nanoseconds */
 } Run;
+
+/* The host's time t_k (--clock). */
+static double grid_time(const Run *run, long long start_ns, long long k)
+{
+    return run->multiply ? run->start + (double)k * run->step : (double)(start_ns + k * run->step_ns) / 1e9;
+}
 
 /* Instantiate, (check the refusals,) set the start values, run the grid, write the CSV, free. */
 static void simulate(void *argument)
@@ -724,8 +735,8 @@ static void simulate(void *argument)
     const ModelDescription *md = run->md;
     Fmu fmu = {0};
     instantiate(&fmu, run->lib, md, run->abs_dir);
-    long long start_ns = llround(run->start * 1e9);
-    double t = (double)start_ns / 1e9;
+    long long start_ns = run->multiply ? 0 : llround(run->start * 1e9);
+    double t = grid_time(run, start_ns, 0);
     if (run->refusals) check_refusals(&fmu, md, t, run->stop);
 
     for (int i = 0; i < run->nsets; i++) {
@@ -761,11 +772,11 @@ static void simulate(void *argument)
     initialize(&fmu, t, run->stop, run->inputs, md);
     write_row(out, &fmu, md, outputs, nout, t);
     for (long long k = 0; k < run->nsteps; k++) {
-        double t_next = (double)(start_ns + (k + 1) * run->step_ns) / 1e9;
+        double t_next = grid_time(run, start_ns, k + 1);
         set_inputs(&fmu, run->inputs, md, t);
-        do_step(&fmu, t, t_next - t);
+        do_step(&fmu, t, run->multiply ? run->step : t_next - t);
         t = t_next;
-        write_row(out, &fmu, md, outputs, nout, t);
+        if ((k + 1) % run->every == 0 || k + 1 == run->nsteps) write_row(out, &fmu, md, outputs, nout, t);
     }
     finish(&fmu);
     if (fclose(out) != 0) die("cannot close %s", run->out_path);
@@ -786,14 +797,16 @@ static void *load_binary(const char *dir, const ModelDescription *md, char *abs_
 int main(int argc, char **argv)
 {
     if (argc < 3) {
-        fprintf(stderr, "usage: %s FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--in IN_CSV] "
-                        "[--set NAME=VALUE]... [--refusals] [--threads N] [--also FMU_DIR2]\n", argv[0]);
+        fprintf(stderr, "usage: %s FMU_DIR OUT_CSV [--stop T] [--step H] [--start T0] [--clock ns|multiply] "
+                        "[--in IN_CSV] [--set NAME=VALUE]... [--every N] [--refusals] [--threads N] "
+                        "[--also FMU_DIR2]\n", argv[0]);
         return 1;
     }
     const char *fmu_dir = argv[1], *out_path = argv[2], *in_path = NULL, *also_dir = NULL;
     double stop = NAN, step = 1e-3, start = 0.0;
     const char *sets[MAX_SETS];
-    int nsets = 0, refusals = 0, threads = 0;
+    int nsets = 0, refusals = 0, threads = 0, multiply = 0;
+    long long every = 1;
     for (int i = 3; i < argc; i++) {
         if (strcmp(argv[i], "--refusals") == 0) {
             refusals = 1;
@@ -803,22 +816,34 @@ int main(int argc, char **argv)
         if (strcmp(argv[i], "--stop") == 0) stop = strtod(argv[++i], NULL);
         else if (strcmp(argv[i], "--step") == 0) step = strtod(argv[++i], NULL);
         else if (strcmp(argv[i], "--start") == 0) start = strtod(argv[++i], NULL);
-        else if (strcmp(argv[i], "--in") == 0) in_path = argv[++i];
+        else if (strcmp(argv[i], "--clock") == 0) {
+            const char *clock = argv[++i];
+            if (strcmp(clock, "multiply") == 0) multiply = 1;
+            else if (strcmp(clock, "ns") != 0) die("--clock %s: allowed: ns, multiply", clock);
+        } else if (strcmp(argv[i], "--in") == 0) in_path = argv[++i];
         else if (strcmp(argv[i], "--threads") == 0) threads = atoi(argv[++i]);
+        else if (strcmp(argv[i], "--every") == 0) every = atoll(argv[++i]);
         else if (strcmp(argv[i], "--also") == 0) also_dir = argv[++i];
         else if (strcmp(argv[i], "--set") == 0) {
             if (nsets == MAX_SETS) die("too many --set");
             sets[nsets++] = argv[++i];
         } else die("unknown option %s", argv[i]);
     }
+    if (every < 1) die("--every %lld: allowed range [1, %lld]", every, LLONG_MAX);
     if (threads < 0 || threads > MAX_THREADS) die("--threads %d: allowed range [1, %d]", threads, MAX_THREADS);
 
     ModelDescription *md = calloc(1, sizeof *md);
     if (!md) die("out of memory");
     parse_model_description(fmu_dir, md);
     if (isnan(stop)) stop = md->has_default_stop ? md->default_stop : 1.0;
-    long long step_ns = llround(step * 1e9);
-    if (!(step_ns > 0)) die("the step must be at least 1 ns");
+    long long step_ns = llround(step * 1e9), nsteps;
+    if (multiply) {
+        if (!(step > 0.0 && isfinite(step))) die("--step %.17g: allowed range (0, inf) s", step);
+        nsteps = llround((stop - start) / step);
+    } else {
+        if (!(step_ns > 0)) die("the step must be at least 1 ns");
+        nsteps = llround((stop - start) * 1e9) / step_ns;
+    }
 
     InputTable inputs = {0};
     if (in_path) read_inputs(in_path, md, &inputs);
@@ -835,8 +860,8 @@ int main(int argc, char **argv)
 
     Run runs[MAX_THREADS];
     for (int k = 0; k < (threads ? threads : 1); k++) {
-        runs[k] = (Run){md, lib, abs_dir, "", sets, nsets, &inputs, start, stop, step_ns,
-                        llround((stop - start) * 1e9) / step_ns, refusals};
+        runs[k] = (Run){md, lib, abs_dir, "", sets, nsets, &inputs, start, stop, step, step_ns, nsteps, every, refusals,
+                        multiply};
         snprintf(runs[k].out_path, sizeof runs[k].out_path, threads ? "%s.%d" : "%s", out_path, k + 1);
     }
     if (!threads) simulate(&runs[0]);
@@ -847,8 +872,8 @@ int main(int argc, char **argv)
         for (int k = 0; k < threads; k++) join_thread(ids[k]);
     }
     if (also_dir) {
-        Run also = {also_md, also_lib, also_abs, "", sets, nsets, &inputs, start, stop, step_ns,
-                    llround((stop - start) * 1e9) / step_ns, refusals};
+        Run also = {also_md, also_lib, also_abs, "", sets, nsets, &inputs, start, stop, step, step_ns, nsteps, every,
+                    refusals, multiply};
         snprintf(also.out_path, sizeof also.out_path, "%s.also", out_path);
         simulate(&also);
         free(also_md);

@@ -30,7 +30,8 @@ SHARED_CACHE = ("test_windows.py", "test_standalone.py", "test_standalone_window
 #: The groups that take longest (seconds on 2 cores, ``--durations``), handed out first so that no
 #: worker is left with a long one at the end.
 LONGEST = ("test_fractions.py", "wine", "test_optimize.py", "test_stability.py", "test_bifurcation.py",
-           "test_masri_caughey.py", "test_frequency_response.py", "test_continuation.py", "test_packaging.py")
+           "test_masri_caughey.py", "test_frequency_response.py", "test_continuation.py", "test_resume.py",
+           "test_packaging.py")
 
 
 def group_of(path: Path) -> str:

@@ -1,5 +1,5 @@
 """A user who is not root, with a bare ``PATH`` and a Python it can run, for the tests of what
-``make nominal`` needs (issue 28, ``tests/test_python_only.py``).
+``make nominal`` needs (``tests/test_python_only.py``).
 
 Run as root (CI), :func:`user` creates a system user for the module's tests (``useradd``; removed
 afterwards) and :func:`run` runs a command as that user with ``runuser``; run as anyone else, the

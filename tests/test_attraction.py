@@ -1,4 +1,4 @@
-"""Where the motion goes (issue 26): the steady state reported for a start is the motion its
+"""Where the motion goes: the steady state reported for a start is the motion its
 trajectory reaches. Each case is checked by an independent route: the FMU marched with fmpy
 alone (:mod:`fmpy_march`, no harness code) from the same start, for hundreds of periods.
 
@@ -32,7 +32,7 @@ RATIO, Y = 1.2, DEFAULT_AMPLITUDE
 @pytest.fixture(scope="module")
 def case(instance) -> SimpleNamespace:
     """The basin map's settings at 1.2 w_n, as ``piezo-fmu basins --ratio 1.2`` sets them: the
-    voltage model 1, the load ``1/(omega_c C_p)`` to 6 digits, ``Y`` = 1 mm; and issue 23's grid of
+    voltage model 1, the load ``1/(omega_c C_p)`` to 6 digits, ``Y`` = 1 mm; and a grid of
     15 x 15 starts, two linear amplitudes either way, row-major over ``p0 x p0'``."""
     values = {"voltage_model": DEFAULT_VOLTAGE_MODEL}
     values["R_load"] = float(f"{circuit_constants(instance, values)['R_opt_estimate_ohm']:.6g}")

@@ -1,4 +1,4 @@
-"""``benchmarks/bench_diagram.py``: where the bifurcation diagram's time goes (issue 32). Its figures
+"""``benchmarks/bench_diagram.py``: where the bifurcation diagram's time goes. Its figures
 rest on three facts, checked here on a small diagram: the timed run is the diagram itself (the
 same points as the diagram without the timers), every launch of the kernel is counted once and
 owned by the piece that made it (the main loop's one a block, the rest in Newton and the checks),

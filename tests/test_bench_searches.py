@@ -1,5 +1,5 @@
 """``benchmarks/bench_searches.py``: the kernel against itself with one piece of its searches' work
-made twice (issue 32). Its figures rest on two facts, checked here on tiny sizes: each version's
+made twice. Its figures rest on two facts, checked here on tiny sizes: each version's
 searches call what it says (the doubled piece in place of the kernel's own), and the four versions
 march the same motion, bit for bit, from random starts and from a bifurcation diagram's clouds."""
 

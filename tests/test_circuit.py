@@ -1,4 +1,4 @@
-"""The circuit voltage models (issue 7; docs/model.md section 5): limits, closed forms, ledger, errors.
+"""The circuit voltage models (docs/model.md section 5): limits, closed forms, ledger, errors.
 
 ``voltage_model = 1`` drives the patch circuit ``C_p V' + V / R = chi delta'`` one way from the
 barrier in contact; ``voltage_model = 2`` adds ``chi V`` to the contact force. The references

@@ -1,4 +1,4 @@
-"""Continuation through folds (issue 23): the branches of the forced response's orbits, their
+"""Continuation through folds: the branches of the forced response's orbits, their
 folds against the sweeps' jumps, and unstable branches against what a disturbed run does."""
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def test_the_results_carry_branches_stability_and_events(study):
     moduli = np.hypot(ds["multiplier_real"].values, ds["multiplier_imag"].values).max(axis=1)
     assert np.array_equal(ds["stable"].values == 1, moduli < 1.0)
     assert ds["amplitude"].attrs["units"] == "m" and ds["omega"].attrs["units"] == "rad/s"
-    assert {"branch", "lam", "amplitude", "stable"} <= set(pandas.read_csv(study / "branches.csv").columns)
+    assert {"branch", "lam", "amplitude_m", "stable"} <= set(pandas.read_csv(study / "branches.csv").columns)
     assert (study / "continuation.png").stat().st_size > 0
     summary = json.loads((study / "summary.json").read_text())
     assert summary["branches"] == len(np.unique(ds["branch"].values)) and summary["evaluations"] > 0

@@ -1,6 +1,6 @@
-"""The documentation (issue 14): the site builds in strict mode, the API reference covers every
-module, the README's links lead somewhere, and the example both pages show runs and prints what
-they say it prints.
+"""The documentation: the site builds in strict mode, the API reference covers every module, the
+README's links lead somewhere, its table of the FMU's variables is the FMU's, and the example both
+pages show runs and prints what they say it prints.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ def test_the_site_builds_in_strict_mode_without_a_warning(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "WARNING" not in done.stderr, done.stderr
     assert (tmp_path / "site" / "index.html").is_file()
-    for page in ("model", "core", "fmu", "simulators", "harness", "validation", "crosscheck", "reliability",
-                 "benchmarks", "api/model", "api/solver", "api/fmi", "api/harness"):
+    for page in ("model", "core", "fmu", "simulators", "harness", "dynamics", "validation", "crosscheck",
+                 "reliability", "benchmarks", "contributing", "api/model", "api/solver", "api/fmi", "api/harness"):
         assert (tmp_path / "site" / page / "index.html").is_file(), page
     reference = (tmp_path / "site" / "api" / "harness" / "index.html").read_text()
     assert 'id="piezo_fmu_harness.fmus.path"' in reference  # generated from the docstring
@@ -84,3 +84,73 @@ def test_the_fmpy_example_runs_and_prints_what_the_pages_say(tmp_path):
     done = subprocess.run([sys.executable, "-c", example], cwd=tmp_path, capture_output=True, text=True, env=environ)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == expected
+
+
+def readme_variable_rows() -> list[tuple[list[str], str, list[str], list[str]]]:
+    """The rows of the README's table of variables: names, causality, units, defaults."""
+    section = (ROOT / "README.md").read_text().split("## The FMU's variables", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in section.splitlines():
+        if not line.startswith("| `"):
+            continue
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        names = re.findall(r"`([^`]+)`", cells[0])
+        units = [unit.strip() for unit in cells[2].split(",")]
+        defaults = [value.strip() for value in cells[3].split(",")] if cells[3] else []
+        rows.append((names, cells[1], units, defaults))
+    return rows
+
+
+def test_the_readme_table_of_variables_is_the_fmus():
+    from piezo_fmu.fmi.variables import VARIABLES
+
+    table = {spec.name: spec for spec in VARIABLES}
+    rows = readme_variable_rows()
+    assert len(rows) >= 15
+    listed = set()
+    for names, causality, units, defaults in rows:
+        assert len(units) == len(names), names
+        assert not defaults or len(defaults) == len(names), names
+        for k, name in enumerate(names):
+            spec = table[name]
+            assert spec.causality == causality, (name, causality)
+            assert units[k] == (spec.unit if spec.type == "Real" else "-"), (name, units[k])
+            if spec.causality in ("parameter", "input"):
+                assert float(defaults[k]) == spec.start, (name, defaults[k])
+            listed.add(name)
+    assert {spec.name for spec in VARIABLES if spec.causality == "input"} <= listed
+    words = {"three": 3, "four": 4, "five": 5, "six": 6, "seven": 7, "eight": 8, "nine": 9, "ten": 10}
+    more = re.search(r"(\w+) more outputs", (ROOT / "README.md").read_text())
+    unlisted = [spec.name for spec in VARIABLES if spec.causality == "output" and spec.name not in listed]
+    assert more and words[more.group(1)] == len(unlisted), unlisted
+
+
+def test_the_derived_figures_the_pages_quote_are_the_codes():
+    """The constants of the nominal damper that several pages quote, computed from the code: the
+    optimal-load estimate, the patch's capacitance, the contact frequency, the frequency of the main
+    mass carrying the impact mass, the resonant amplitude of the main mass alone under 1 mm of base
+    motion, and the random study's warm-up."""
+    import math
+
+    from piezo_fmu import Damper, Parameters
+    from piezo_fmu_harness.random_response.spec import default_warmup
+
+    nominal = Parameters()
+    damper = Damper.of(nominal)
+    omega_c, c_p = damper.contact_frequency, damper.barrier.C_p
+    zeta = nominal.C / (2 * math.sqrt(nominal.K * nominal.M))
+    carried = math.sqrt(nominal.M / (nominal.M + nominal.m))
+    warmup = default_warmup({"M": nominal.M, "K": nominal.K, "C": nominal.C}, 0.1)
+    quoted = {
+        "README.md": [f"`sqrt(K/(M + m))` = {carried:.3f} `w_n`", f"{1e3 * 1e-3 / (2 * zeta):.0f} mm"],
+        "docs/harness.md": [f"`R_opt ~ 1/(omega_c C_p)` = {1e-6 / (omega_c * c_p):.2f} MOhm",
+                            f"`C_p` = {1e9 * c_p:.3f}",
+                            f"`omega_c` = {omega_c:.0f}", f"`sqrt(K/(M + m)) = {carried:.3f} w_n`",
+                            f"| {1e3 * 1e-3 / (2 * zeta):.1f} mm, stable", f"({warmup:.1f} s for the"],
+        "docs/core.md": [f"`omega_c` ({omega_c:.0f} rad/s", f"= {1e-6 / (omega_c * c_p):.2f} MOhm"],
+        "docs/model.md": [f"`w_n = {omega_c:.0f} rad/s`", f"| {1e-6 / (omega_c * c_p):.2f} MOhm |"],
+    }
+    for page, figures in quoted.items():
+        text = (ROOT / page).read_text()
+        missing = [figure for figure in figures if figure not in text]
+        assert not missing, (page, missing)

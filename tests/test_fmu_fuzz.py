@@ -1,4 +1,4 @@
-"""Reliability of the FMU in a host (issue 6): fuzzing, bad values, instance life cycles, exit.
+"""Reliability of the FMU in a host: fuzzing, bad values, instance life cycles, exit.
 
 Everything here goes through ``fmus/PiezoImpactDamper.fmu`` with fmpy (``FMU2Slave``), as a
 co-simulation host drives it:

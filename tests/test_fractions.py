@@ -1,8 +1,8 @@
-"""Basin fractions across a band (issues 26, 31): at each frequency the share of random starts that
+"""Basin fractions across a band: at each frequency the share of random starts that
 reach each attractor, adding to 1, with names kept across the band, and the share the budget left
 undecided, never folded into an attractor; every attractor and a random sample of starts checked by
-the FMU marched with fmpy alone. The starts issue 31 found labelled chaotic at 1.25 w_n reach the
-two-impact orbit, in the study and through fmpy alone."""
+the FMU marched with fmpy alone. The starts a 600-period cap once labelled chaotic at 1.25 w_n
+reach the two-impact orbit, in the study and through fmpy alone."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ BAND = ("--ratio-min", 1.15, "--ratio-max", 1.25, "--count", 3, "--starts", STAR
 @pytest.fixture(scope="module")
 def fractions(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fractions")
-    assert run_cli("fractions", *BAND, "--jobs", 2, "--out", out) == 0
+    assert run_cli("fractions", *BAND, "--confirm", 3, "--jobs", 2, "--out", out) == 0
     return out
 
 
@@ -40,7 +40,9 @@ def summary(fractions) -> dict:
 
 
 def test_the_summary_gives_the_marching_time_apart_from_the_fmus_checks(summary):
-    assert 0 < summary["marching_wall_s"] < summary["wall_s"]
+    assert 0 < summary["marching_s"] < summary["wall_s"] and 0 < summary["checking_s"] < summary["wall_s"]
+    assert summary["marching_s"] + summary["checking_s"] <= summary["wall_s"]
+    assert summary["fmu_checks"]["seconds"] == summary["checking_s"]
 
 
 def test_the_fractions_add_to_one_at_every_frequency_within_their_intervals(fractions):
@@ -52,7 +54,7 @@ def test_the_fractions_add_to_one_at_every_frequency_within_their_intervals(frac
     assert (ds["fraction"].values <= ds["fraction_high"].values).all()
     assert np.isfinite(ds["amplitude"].values[present]).all()
     assert (fractions / "fractions.png").stat().st_size > 0
-    assert (fractions / "fractions.csv").read_text().startswith("omega,attractor,")
+    assert (fractions / "fractions.csv").read_text().startswith("omega_rad_per_s,attractor,")
 
 
 def test_the_two_impact_orbit_keeps_one_name_across_the_band(fractions):
@@ -64,24 +66,27 @@ def test_the_two_impact_orbit_keeps_one_name_across_the_band(fractions):
     assert np.all(np.diff(amplitude) < 0)  # one branch, its amplitude falling with the frequency
 
 
-def test_every_attractor_at_every_frequency_was_checked_by_the_fmu_and_none_disagreed(summary):
-    """A check may part from the study in a chaotic transient (at 1.25 w_n starts wander chaotically
-    for hundreds of periods before some land on the orbit): then the FMU's trajectory had left the
-    batch engine's before the study's answer was known. None may disagree while they were together."""
+def test_every_attractor_across_the_band_and_a_start_at_every_frequency_was_checked_and_none_disagreed(summary):
+    """The FMU checks one start of every attractor across the band, and ``--confirm`` (here the
+    count of frequencies) random starts, one a frequency. A check may part from the study in a
+    chaotic transient (at 1.25 w_n starts wander chaotically for hundreds of periods before some
+    land on the orbit): then the FMU's trajectory had left the batch engine's before the study's
+    answer was known. None may disagree while they were together."""
     checks = summary["fmu_checks"]
     assert checks["disagree"] == 0 and checks["agree"] + checks["parted"] == checks["checked"]
     for check in checks["starts"]:
         if check["verdict"] == "parted":
             assert check["diverged_at"] <= check["study_periods"]
-    agreed = {(c["index"] // STARTS, c["study"]) for c in checks["starts"] if c["verdict"] == "agrees"}
-    present = {(f, a["name"]) for f, point in enumerate(summary["by_frequency"]) for a in point["attractors"]
+    agreed = {c["study"] for c in checks["starts"] if c["verdict"] == "agrees"}
+    present = {a["name"] for point in summary["by_frequency"] for a in point["attractors"]
                if a["kind"] != "undecided"}  # undecided is no attractor: it claims nothing to check
-    assert agreed >= present  # every attractor at every frequency: one start the FMU took there
+    assert agreed == present  # every attractor across the band: one start the FMU took to it
+    assert {c["index"] // STARTS for c in checks["starts"]} == {0, 1, 2}  # and a start at every frequency
 
 
 def test_the_budget_left_undecided_starts_undecided_with_the_transients_measured(fractions, summary):
     """At 1.25 w_n a budget of 1000 periods leaves starts on their chaotic transients: they are
-    undecided (issue 31), never chaotic, and the survival fit shows no plateau; the dataset says the
+    undecided, never chaotic, and the survival fit shows no plateau; the dataset says the
     undecided share, the lifetime with its interval and the survival curve."""
     ds = open_dataset(fractions / "fractions.nc")
     names = [str(n) for n in ds["attractor_name"].values]
@@ -101,7 +106,7 @@ def test_the_budget_left_undecided_starts_undecided_with_the_transients_measured
     assert np.allclose(curve, expected) and curve[-1] == pytest.approx(undecided[2])
     assert summary["budget_periods"] == 1000 and summary["undecided"]["starts"] == round(undecided[2] * STARTS)
     assert (fractions / "transients.png").stat().st_size > 0
-    assert (fractions / "transients.csv").read_text().startswith("ratio,omega,undecided,")
+    assert (fractions / "transients.csv").read_text().startswith("ratio,omega_rad_per_s,undecided,")
 
 
 def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_unpredictable(fractions):
@@ -128,7 +133,7 @@ def test_random_starts_marched_with_fmpy_alone_end_where_the_study_says_or_are_u
         marcher.close()
 
 
-#: Starts of the seed-0 draw at 1.25 w_n that a 600-period cap left "chaotic" (issue 31). Their
+#: Starts of the seed-0 draw at 1.25 w_n that a 600-period cap left "chaotic". Their
 #: chaotic transients are not the batch engine's (they part in the last bits), and their lengths hang
 #: on the CPU type too: numpy's AVX-512 loops and OpenBLAS's kernels move the FMU's last bits. On
 #: CPUs without AVX-512 the FMU's trajectories make two impacts every period from periods 427, 1274,
@@ -193,3 +198,18 @@ def test_bad_fractions_input_is_refused_with_exit_status_2(tmp_path, capsys, arg
     out = tmp_path / "out"
     assert_refused(capsys, "fractions", argv, words, "--out", out, "--fmu", FMU)
     assert not (out / "points.jsonl").exists()
+
+
+def test_a_study_of_one_frequency_draws_its_shares_as_one_bar_without_a_warning(tmp_path):
+    """One frequency: the shares are one stacked bar and no figure warns (a band of one frequency
+    used to make matplotlib warn of identical limits, twice, and leave the shares' panel empty)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert run_cli("fractions", "--ratio-min", 1.2, "--ratio-max", 1.2, "--count", 1, "--starts", 8,
+                       "--confirm", 0, "--jobs", 1, "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
+    from piezo_fmu_harness.studies.fractions.figure import frequency_limits
+
+    lo, hi = frequency_limits(np.array([1.2]))
+    assert lo < 1.2 < hi and (tmp_path / "fractions.png").stat().st_size > 0

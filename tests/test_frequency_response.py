@@ -1,4 +1,4 @@
-"""The frequency response (issue 13): steady states under harmonic base motion, through the FMU.
+"""The frequency response: steady states under harmonic base motion, through the FMU.
 
 The linear limit is checked against the closed form of the base-excited oscillator; the
 steady-state detection against a known periodic orbit and a case that cannot settle; the two
@@ -31,7 +31,7 @@ NATURAL = math.sqrt(K / M)
 #: frequency, four times a cycle, on one orbit whichever way the sweep goes.
 IMPACT_COUNT = 4
 IMPACT_STUDY = ("frequency-response", "--set", "C_eq=100", "--amplitude", 4e-3, "--ratio-min", 0.5, "--ratio-max",
-                0.725, "--count", IMPACT_COUNT, "--max-cycles", 150, "--jobs", 2, "--fmu", FMU, "--no-progress")
+                0.725, "--count", IMPACT_COUNT, "--cycles-per-frequency", 150, "--jobs", 2, "--fmu", FMU, "--no-progress")
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +76,8 @@ def test_a_study_writes_netcdf_csv_summary_and_figures(linear_study):
 
     table = pandas.read_csv(linear_study / "frequency_response.csv")
     assert len(table) == 4 * 31
-    assert {"damper", "direction", "omega", "ratio", "amplitude", "transmissibility", "impacts_per_cycle", "V_rms",
-            "harvested_power", "settled"} <= set(table.columns)
+    assert {"damper", "direction", "omega_rad_per_s", "ratio", "amplitude_m", "transmissibility", "impacts_per_cycle",
+            "V_rms_V", "harvested_power_W", "settled"} <= set(table.columns)
     summary = json.loads((linear_study / "summary.json").read_text())
     peak = summary["resonant_amplitude_m"]["without the damper, sweep up"]
     assert peak["at_ratio"] == 1.0
@@ -201,7 +201,7 @@ def test_resume_continues_each_chain_from_its_last_finished_point(impact_study, 
     (["--count", "1"], ["--count 1", "allowed range [2, inf)"]),
     (["--samples", "8"], ["--samples 8", "allowed range [16, inf)"]),
     (["--tolerance", "0.5"], ["--tolerance 0.5", "(0, 0.01]"]),
-    (["--max-cycles", "3"], ["--max-cycles 3", "allowed range [10, inf)"]),
+    (["--cycles-per-frequency", "3"], ["--cycles-per-frequency 3", "allowed range [10, inf)"]),
     (["--newton-iterations", "-1"], ["--newton-iterations -1", "allowed range [0, inf)"]),
     (["--load", "-5"], ["--load -5", "R_load = -5", "allowed range (0, inf) Ohm"]),
     (["--voltage-model", "3"], ["--voltage-model 3", "voltage_model = 3", "above its maximum 2"]),

@@ -98,10 +98,10 @@ def test_nominal_writes_its_files_and_its_summary_equals_a_direct_fmpy_run(fmu, 
 
     table = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
     assert len(table) == round(stop / step) + 1
-    assert np.allclose(np.diff(table["time"]), step)
+    assert np.allclose(np.diff(table["time_s"]), step)  # each column named with its unit
     assert table["impact_count"][-1] == direct["impact_count"]
     # Without the damper the main mass rings on K and C alone: the damper takes amplitude off it.
-    assert np.max(table["main_displacement"][-2000:]) < np.max(table["main_displacement_without_damper"][-2000:])
+    assert np.max(table["main_displacement_m"][-2000:]) < np.max(table["main_displacement_without_damper_m"][-2000:])
 
 
 # -- sweeps ----------------------------------------------------------------------------------------
@@ -125,11 +125,11 @@ def test_small_sweep_gives_the_metrics_of_single_fmpy_runs(pool_sweep, fmu):
 
     table = pandas.read_csv(pool_sweep / "sweep.csv")
     assert len(table) == 16 and list(table["index"]) == list(range(16))
-    assert np.array_equal(table["DI"].values, ds["DI"].values.reshape(-1))
-    assert np.allclose(table["DI_cm_per_s"], 100 * table["DI"])
+    assert np.array_equal(table["DI_m_per_s"].values, ds["DI"].values.reshape(-1))
+    assert np.allclose(table["DI_cm_per_s"], 100 * table["DI_m_per_s"])
     lo, hi = PAPER_ZONES["m"]
     assert table["in_paper_design_zone"].tolist() == [(lo <= m <= hi + 1e-12) and x1 <= 0.025 + 1e-12
-                                                      for x1, m in zip(table["x1"], table["m"])]
+                                                      for x1, m in zip(table["x1_m"], table["m_kg"])]
     zones = json.loads((pool_sweep / "zones.json").read_text())
     assert set(zones["zones"]) == {"DI", "V_rms", "perfectibility"}
     for name in ("DI.png", "V_rms.png", "P_ave.png", "perfectibility.png"):

@@ -193,15 +193,15 @@ def test_the_kernels_switch_rules_are_the_models_on_both_sides_of_every_threshol
     """:mod:`.kernel.switches` against :mod:`piezo_fmu.model.dynamics`, on random masses and
     velocities and on states straddling the threshold of ``approach_sign`` (the main spring and
     damper pushing neither way: ``K u + C u'`` near 0, either side, and exactly 0): the same
-    velocities after a capture and a release, bit for bit, and the same side."""
+    velocities and losses after a capture and a release, bit for bit, and the same side."""
     rng = np.random.default_rng(11)
     for _ in range(2000):
         m, M_eq, M1 = (10.0 ** rng.uniform(-4, 2, 3)).tolist()
         M = M1 + M_eq
         dp, dq = (rng.standard_normal(2) * 10.0 ** rng.uniform(-9, 1, 2)).tolist()
         dq = dp if rng.uniform() < 0.05 else dq  # no relative velocity
-        assert switches.capture(m, M_eq, dp, dq) == dynamics.capture(m, M_eq, dp, dq)[0]
-        assert switches.release(M, M1, M_eq, dp, dq) == dynamics.release(M, M1, M_eq, dp, dq)[0]
+        assert switches.capture(m, M_eq, dp, dq) == dynamics.capture(m, M_eq, dp, dq)
+        assert switches.release(M, M1, M_eq, dp, dq) == dynamics.release(M, M1, M_eq, dp, dq)
     K, C = 1000.0, 0.1
     for u in thresholds(rng, 300):
         # u' chosen so that K u + C u' falls either side of 0, by a few ulp, or on it
@@ -217,9 +217,9 @@ def test_every_function_the_kernel_compiles_is_registered_where_it_is_defined():
     registered (compiled for the target), found by what its code names, and no function is
     registered twice under one name in a module."""
     from piezo_fmu.solver.batch.attractors import books
-    from piezo_fmu.solver.batch.kernel import cpu, flows, registry, scalars
+    from piezo_fmu.solver.batch.kernel import cpu, flows, inputs, ledger, registry, scalars
 
-    modules = (books, cpu, flat, flows, location, periods, rounds, scalars, switches)
+    modules = (books, cpu, flat, flows, inputs, ledger, location, periods, rounds, scalars, switches)
     registered = {f for f in registry._KINDS if f.__module__ in {m.__name__ for m in modules}}
     assert len(registered) >= 30
     for function in registered:

@@ -1,6 +1,7 @@
 """Where the compiled kernel is kept (:mod:`piezo_fmu.solver.batch.kernel.cache`): a copy of the
 package (an FMU's) finds the code another compiled, each version of the batch engine's files has its
-own folder, and a folder that cannot be written costs a compilation, not the study."""
+own folder, processes that start on an empty cache at once take turns and march the same bits, and
+a folder that cannot be written costs a compilation, not the study."""
 
 from __future__ import annotations
 
@@ -89,3 +90,46 @@ def test_a_cache_folder_that_cannot_be_written_costs_a_compilation_not_the_study
         assert np.array_equal(np.asarray(there[name], dtype=values.dtype), values, equal_nan=True), name
     assert here["impacts"].sum() > 0
     assert sorted(ROOT.rglob("*.nbi")) == before
+
+
+#: A march through every compiled entry point a study uses (the march, the Lyapunov pair, settle's
+#: bookkeeping), printing a digest of every output.
+EVERY_ENTRY = """
+import hashlib, math
+import numpy as np
+from piezo_fmu import Parameters
+from piezo_fmu.solver.batch import Ensemble, HarmonicHold, SettleSettings, settle
+rng = np.random.default_rng(0)
+w, d = 1.2 * math.sqrt(1000.0), 8e-3
+p = rng.uniform(-d, d, 24)
+starts = np.column_stack([p, rng.uniform(-d * w, d * w, 24), p + rng.uniform(-d / 2, d / 2, 24), np.zeros(24)])
+params, drive = Parameters(voltage_model=2, R_load=3.59e6), HarmonicHold(w, 1e-3)
+marched = Ensemble(params, drive, starts).advance(10, observe=True)
+pair = Ensemble(params, drive, starts[:4]).separate(np.full((4, 4), 1e-9), np.ones((4, 4)), np.full(4, 1e-9), 4)
+done = settle(params, drive, starts[:12], settings=SettleSettings(max_cycles=120))
+digest = hashlib.sha256()
+for array in (marched["sections"], marched["top"], marched["impacts"], pair["logs"], done.labels, done.final):
+    digest.update(np.ascontiguousarray(array).tobytes())
+print(digest.hexdigest())
+"""
+
+
+def test_four_processes_that_compile_into_an_empty_cache_at_once_take_turns_and_march_the_same_bits(tmp_path):
+    """Four processes started together on an empty ``NUMBA_CACHE_DIR`` (a Dask cluster's workers at
+    their first task): every one finishes, with the bits of this process's kernel, and the compiled
+    code is saved by one of them only, the others load it (the first call of each entry point holds
+    the cache folder's lock). Without the lock each process saves its own compilation into the same
+    index, and a version number may come to point at another process's code."""
+    here = subprocess.run([sys.executable, "-c", EVERY_ENTRY], capture_output=True, text=True, timeout=900,
+                          cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+    assert here.returncode == 0, here.stderr[-3000:]
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), NUMBA_DEBUG_CACHE="1",
+               PYTHONPATH=str(ROOT / "src"))
+    processes = [subprocess.Popen([sys.executable, "-c", EVERY_ENTRY], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True, env=env, cwd=tmp_path) for _ in range(4)]
+    outputs = [process.communicate(timeout=900) for process in processes]
+    assert [process.returncode for process in processes] == [0, 0, 0, 0], [err[-2000:] for _, err in outputs]
+    digests = [out.strip().splitlines()[-1] for out, _ in outputs]
+    assert digests == [here.stdout.strip().splitlines()[-1]] * 4
+    savers = [out.count("data saved") for out, _ in outputs]
+    assert sum(1 for count in savers if count) == 1 and max(savers) > 10, savers

@@ -1,4 +1,4 @@
-"""The harness's load sweep and single-impact voltages (issue 7), through the FMU with fmpy.
+"""The harness's load sweep and single-impact voltages, through the FMU with fmpy.
 
 References are direct fmpy runs of the same FMU; short durations and few loads keep it fast.
 """
@@ -152,26 +152,26 @@ def test_the_single_impact_peak_is_the_fmus_own_impact_voltage(tmp_path):
     side = result["barrier"]
     for model, expected_peak in (("0", 1800), ("1", 10)):
         e = entry["models"][model]
-        peak = np.max(np.abs(series[f"voltage_model{model}"]))
+        peak = np.max(np.abs(series[f"voltage_model{model}_V"]))
         assert e["peak_voltage_sampled_V"] == pytest.approx(peak, rel=1e-11) and peak > expected_peak
         # Sampled every microsecond, the peak is the FMU's own eq. 28 peak of the impact.
         assert peak == pytest.approx(e["last_impact_voltage_V"], rel=1e-6), model
         assert e["impacts_in_window"] == 1
     # Model 0 is quasi-static: V / delta is the constant k_V throughout the contact.
-    contact = series["deflection_model0"] > 1e-6
-    ratio = series["voltage_model0"][contact] / series["deflection_model0"][contact]
+    contact = series["deflection_model0_m"] > 1e-6
+    ratio = series["voltage_model0_V"][contact] / series["deflection_model0_m"][contact]
     assert np.ptp(ratio) < 1e-9 * ratio.mean() and ratio.mean() == pytest.approx(6.83e6, rel=1e-2)
     # Model 1 at 52 kOhm follows the deflection rate: it changes sign within the contact.
-    inside = series["deflection_model1"] > 0
-    assert series["voltage_model1"][inside].max() > 0 > series["voltage_model1"][inside].min()
+    inside = series["deflection_model1_m"] > 0
+    assert series["voltage_model1_V"][inside].max() > 0 > series["voltage_model1_V"][inside].min()
     # The fine samples are those of a plain fmpy run over the same span.
-    stop = series["time"][-1]
+    stop = series["time_s"][-1]
     direct = simulate_fmu(str(FMU), start_values={"voltage_model": 1}, stop_time=stop, output_interval=1e-5,
                           output=[f"voltage_{side}"])
-    index = np.searchsorted(series["time"], direct["time"] - 1e-12)
-    keep = (index < len(series)) & (direct["time"] >= series["time"][0])
-    matched = series["voltage_model1"][index[keep]]
-    assert np.allclose(series["time"][index[keep]], direct["time"][keep], rtol=0, atol=1e-12)
+    index = np.searchsorted(series["time_s"], direct["time"] - 1e-12)
+    keep = (index < len(series)) & (direct["time"] >= series["time_s"][0])
+    matched = series["voltage_model1_V"][index[keep]]
+    assert np.allclose(series["time_s"][index[keep]], direct["time"][keep], rtol=0, atol=1e-12)
     assert keep.sum() > 100
     assert np.allclose(matched, direct[f"voltage_{side}"][keep], rtol=1e-9, atol=1e-9)
 

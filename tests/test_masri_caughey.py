@@ -1,4 +1,4 @@
-"""Closed form, impacting (issue 20): the symmetric two-impact orbit of Masri and Caughey (1966)
+"""Closed form, impacting: the symmetric two-impact orbit of Masri and Caughey (1966)
 under base excitation (tests/masri_caughey.py, independent of the project) against the
 harness's orbit through the FMU as the contact stiffens (K_eq x 1, 10, 100, 1000 at one
 restitution coefficient), in amplitude, impact velocity and stability (docs/validation.md).

@@ -1,7 +1,7 @@
-"""What a motion on no orbit is (issues 23, 31): a modulated motion and a chaotic one of the default
+"""What a motion on no orbit is: a modulated motion and a chaotic one of the default
 damper, measured by the harness's Lyapunov exponent from the period map's Jacobians, and confirmed
 independently: by two nearby starts marched side by side, and by the spectrum of the section
-samples. One trajectory marched to a cap is reported undecided (issue 31), the window's class kept
+samples. One trajectory marched to a cap is reported undecided, the window's class kept
 beside it: whether the motion persists is shown by the studies of many starts
 (tests/test_bifurcation.py)."""
 

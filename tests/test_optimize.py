@@ -1,4 +1,4 @@
-"""``piezo-fmu optimize`` (issue 13): differential evolution over FMU parameters, through the FMU.
+"""``piezo-fmu optimize``: differential evolution over FMU parameters, through the FMU.
 
 A smooth objective with an optimum known in closed form, the paper's perfectibility against a
 grid of the same budget, an interrupted run resumed from its log, and bad input.

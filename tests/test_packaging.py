@@ -1,4 +1,4 @@
-"""piezo-fmu as a user installs it (issue 14).
+"""piezo-fmu as a user installs it.
 
 - ``python -m build`` makes an sdist and, from it, a wheel; ``twine check --strict`` accepts both.
 - The wheel carries the committed FMUs, byte for byte, and installs no generic top-level name.

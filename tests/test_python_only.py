@@ -1,4 +1,4 @@
-"""``make nominal`` needs only python3 (issue 28): no system package manager, no root, no C
+"""``make nominal`` needs only python3: no system package manager, no root, no C
 compiler, no Wine.
 
 - ``make -n nominal`` calls no system package manager (no apt, apt-get, dpkg, sudo, nothing of
@@ -90,7 +90,7 @@ def test_make_n_nominal_calls_no_system_package_manager(tmp_path):
     assert nominal.returncode == 0, nominal.stderr
     assert f"python3 -m venv {fresh}" in nominal.stdout
     assert f"{fresh}/bin/python -m pip install -q --disable-pip-version-check -e .\n" in nominal.stdout
-    assert f"{fresh}/bin/python -m piezo_fmu.build\n{fresh}/bin/piezo-fmu nominal\n" in nominal.stdout
+    assert f"{fresh}/bin/python -m piezo_fmu.build\n{fresh}/bin/piezo-fmu nominal --force\n" in nominal.stdout
     assert PACKAGE_MANAGERS.findall(nominal.stdout) == [], nominal.stdout
     assert "[test]" not in nominal.stdout  # the test extras are make test's
     test = subprocess.run(["make", "-n", "test", f"VENV={fresh}"], cwd=ROOT, capture_output=True, text=True)

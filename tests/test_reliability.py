@@ -1,4 +1,4 @@
-"""Reliability of the core (issue 6): bad values, chatter and sticking, a long run, determinism.
+"""Reliability of the core: bad values, chatter and sticking, a long run, determinism.
 
 A host may run the damper for hours with inputs nobody checked. What is shown here, on
 :class:`piezo_fmu.Simulator` (the FMU side is ``test_fmu_fuzz.py``, sweeps ``test_sweep_faults.py``):

@@ -1,6 +1,6 @@
-"""``--resume`` on a damaged results folder (issue 53): every study that resumes (sweep,
-frequency-response, optimize, basins, fractions), each run once at its smallest, then resumed from
-a copy of its folder with one line spoiled. A line that is not JSON, a record without the study's
+"""``--resume`` on a damaged results folder: every study that resumes (sweep, load-sweep,
+frequency-response, continuation, bifurcation, optimize, basins, fractions), each run once at its
+smallest, then resumed from a copy of its folder with one line spoiled. A line that is not JSON, a record without the study's
 fields, or a record of another run stops the run with exit status 2 and one line naming the file,
 the line and ``--force``, and the folder is left byte for byte as it was; a half-written last line
 (a killed writer's) is still cut off and its point recomputed. A header that cannot be read, or
@@ -20,12 +20,18 @@ FMU = ROOT / "fmus" / "PiezoImpactDamper.fmu"
 #: Each study at its smallest, and the file its records go to.
 STUDIES = {
     "sweep": (("--grid", "x1=0:0.03:2", "--stop-time", 0.2), "points.jsonl"),
+    "load-sweep": (("--r-min", 1e5, "--r-max", 1e7, "--count", 3, "--models", 1, "--stop-time", 0.2, "--no-impact"),
+                   "points.jsonl"),
+    "continuation": (("--set", "d=1", "--ratio-min", 1.9, "--ratio-max", 2.0, "--count", 2), "points.jsonl"),
+    "bifurcation": (("--ratio-min", 1.1, "--ratio-max", 1.2, "--count", 2, "--max-cycles", 40, "--confirm", 0),
+                    "points.jsonl"),
     "frequency-response": (("--set", "d=1", "--ratio-min", 0.9, "--ratio-max", 1.0, "--count", 2), "points.jsonl"),
     "optimize": (("--param", "m=0.02:0.2", "--maxiter", 1, "--popsize", 2, "--no-grid", "--stop-time", 0.5),
                  "evaluations.jsonl"),
     "basins": (("--ratio", 1.2, "--grid", 2, "--confirm", 0), "points.jsonl"),
     "fractions": (("--ratio-min", 1.15, "--ratio-max", 1.2, "--count", 2, "--starts", 2, "--max-cycles", 100,
                    "--confirm", 0), "points.jsonl"),
+    "random": (("--realizations", 60, "--duration", 2, "--warmup", 0.5, "--confirm", 0), "points.jsonl"),
 }
 COMMON = ("--jobs", 1, "--no-progress", "--fmu", FMU)
 
@@ -203,3 +209,106 @@ def test_every_chunk_of_a_fractions_study_is_checked_against_its_frequencies_and
         check(chunk(1, [(600 + k, 2) for k in range(300)], frequencies=[1], cycles=1))
     with pytest.raises(Damaged, match="chunk 1 holds other starts"):
         check(chunk(1, [(300 + k, 1) for k in range(300)], frequencies=[2], cycles=1))
+
+
+# -- a continuation resumed: its recorded branches replayed ------------------------------------------
+
+def fake_chain(instance, problem: dict, steady: dict, lams: list, direction: str) -> dict:
+    """A sweep of the seeds without the FMU: a stable orbit at every value, of order 1 below 1.2."""
+    return {"direction": direction, "records": [
+        {"lam": lam, "settled": True, "verdict": "stable", "state": [0.0] * 4, "phase": 0.0, "impacts_per_cycle": 2,
+         "order": 1 if lam < 1.2 else 2, "amplitude": 1e-3 * lam, "unstable_orbits": [], "status": "ok"}
+        for lam in lams]}
+
+
+def fake_branch(instance, problem: dict, settings: dict, seed: dict) -> dict:
+    """A branch without the FMU: the seed's orbit over +-0.15 of its value, and a doubled seed once."""
+    lams = [seed["lam"] + step for step in (-0.15, 0.0, 0.15)]
+    doubled = [{**seed, "order": 2 * seed["order"], "depth": 1}] if seed.get("depth", 0) == 0 else []
+    return {"seed": seed, "points": [{"lam": lam, "amplitude": 1e-3 * lam, "order": seed["order"]} for lam in lams],
+            "events": [], "seeds": doubled, "ends": ["left the band", "left the band"], "evaluations": 3}
+
+
+def continuation(monkeypatch):
+    from piezo_fmu_harness.periodic.steady_state import Settings as Steady
+    from piezo_fmu_harness.studies.continuation import study as cs
+    from piezo_fmu_harness.studies.continuation.tracer import Problem, Settings
+
+    monkeypatch.setattr(cs, "seed_chain", fake_chain)
+    monkeypatch.setattr(cs, "trace_branch", fake_branch)
+    problem = Problem(values={}, parameter="ratio", bounds=(0.5, 2.0), natural=31.6)
+    return cs.Continuation(problem, Settings(), Steady(), [0.5 + 0.1 * k for k in range(16)], 12)
+
+
+def test_a_continuation_killed_among_its_branches_resumes_to_the_branches_it_would_have_followed(monkeypatch):
+    """Which seed a branch starts from depends on the branches finished before it: replaying the
+    recorded ones in their order gives the study the same state, and the branches that were running
+    when it stopped run again; the result is the uninterrupted run's, branch for branch."""
+    from piezo_fmu_harness.engine import InProcess
+
+    whole, kept = continuation(monkeypatch), []
+    whole.run(InProcess(None), log=kept.append, progress=False)
+    assert len(whole.branches) >= 4 and len(kept) == 2 + len(whole.branches)
+
+    def killed_after(count: int):
+        def log(record: dict) -> None:
+            if len(written) == count:
+                raise KeyboardInterrupt
+            written.append(json.loads(json.dumps(record)))  # as points.jsonl keeps it
+        written: list = []
+        return log, written
+
+    log, written = killed_after(4)
+    with pytest.raises(KeyboardInterrupt):
+        continuation(monkeypatch).run(InProcess(None), log=log, progress=False)
+    resumed, more = continuation(monkeypatch), []
+    resumed.run(InProcess(None), recorded=tuple(written), log=more.append, progress=False)
+    assert len(more) == len(kept) - 4  # only what was not recorded ran
+    assert [b["seed"] for b in resumed.branches] == [b["seed"] for b in whole.branches]
+    assert [b["points"] for b in resumed.branches] == [b["points"] for b in whole.branches]
+    assert resumed.skipped == whole.skipped
+
+
+@pytest.mark.parametrize("study", ["load-sweep", "bifurcation"])
+def test_a_run_killed_midway_finishes_from_its_records_to_the_results_of_one_run(finished_runs, study, tmp_path):
+    """The records of a killed run (its first half) are kept, and ``--resume`` runs the rest: the
+    results are those of the run that was never interrupted."""
+    folder = finished_runs[study]
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    lines = (copy / "points.jsonl").read_text().splitlines(keepends=True)
+    (copy / "points.jsonl").write_text("".join(lines[:len(lines) // 2]))
+    assert resume(study, copy) == 0
+    table = {"load-sweep": "load_sweep.csv", "bifurcation": "bifurcation.csv"}[study]
+    assert (copy / table).read_text() == (folder / table).read_text()
+    assert len((copy / "points.jsonl").read_text().splitlines()) == len(lines)
+
+
+@pytest.fixture(scope="module")
+def finished_runs(tmp_path_factory) -> dict:
+    runs = {}
+    for study in ("load-sweep", "bifurcation"):
+        runs[study] = tmp_path_factory.mktemp(study)
+        assert run_cli(study, *STUDIES[study][0], *COMMON, "--out", runs[study]) == 0
+    return runs
+
+
+# -- a command that writes at its end: its folder, refused unless --force -----------------------------
+
+SHORT = {"nominal": ("--stop-time", 0.05), "impact-voltage": ("--load", 52e3, "--models", 0),
+         "two-designs": ("--stop-time", 0.05)}
+
+
+@pytest.mark.parametrize("command", list(SHORT))
+def test_a_folder_that_holds_a_run_is_refused_unless_force(command, tmp_path, capsys):
+    argv = (command, *SHORT[command], "--fmu", FMU, "--out", tmp_path)
+    assert run_cli(*argv) == 0
+    before = snapshot(tmp_path)
+    capsys.readouterr()
+    assert run_cli(*argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"piezo-fmu {command}: error: --out {tmp_path} already holds a ") and "--force" in err, err
+    assert snapshot(tmp_path) == before
+    (tmp_path / "notes.txt").write_text("mine")
+    assert run_cli(*argv, "--force") == 0
+    assert (tmp_path / "notes.txt").read_text() == "mine"  # what the command does not write stays

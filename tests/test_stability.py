@@ -1,4 +1,4 @@
-"""Only stable orbits are the response (issue 20): the Floquet multipliers of the frequency
+"""Only stable orbits are the response: the Floquet multipliers of the frequency
 response's orbits, checked against the closed form of the linear oscillator and against what a
 perturbed run does, and the stability of every orbit the frequency response reports.
 
@@ -170,10 +170,10 @@ def test_the_results_carry_multipliers_verdicts_and_the_unstable_orbits(band_stu
     assert np.all(ds["unstable_max_multiplier"].values[ds["unstable_verdict"].values == "unstable"] > 1.0)
     table = pandas.read_csv(band_study / "frequency_response.csv")
     assert {"max_multiplier", "stability_margin", "multiplier_error", "verdict", "multiplier_1_real",
-            "multiplier_4_imag", "amplitude_min", "amplitude_max", "unstable_orbits"} <= set(table.columns)
+            "multiplier_4_imag", "amplitude_min_m", "amplitude_max_m", "unstable_orbits"} <= set(table.columns)
     unstable = pandas.read_csv(band_study / "unstable_orbits.csv")
     assert len(unstable) == ds.sizes["unstable"]
-    assert {"damper", "direction", "ratio", "amplitude", "max_multiplier", "verdict"} <= set(unstable.columns)
+    assert {"damper", "direction", "ratio", "amplitude_m", "max_multiplier", "verdict"} <= set(unstable.columns)
     summary = json.loads((band_study / "summary.json").read_text())
     assert summary["unstable_orbits_met"]["with the damper, sweep up"]["count"] + \
         summary["unstable_orbits_met"]["with the damper, sweep down"]["count"] == ds.sizes["unstable"]

@@ -181,9 +181,14 @@ def test_the_linux_runtime_needs_the_glibc_the_docs_name(standalone_fmus):
 
 
 @pytest.mark.parametrize("version", [2, 3])
-def test_the_readme_gives_each_standalone_fmus_size(standalone_fmus, version):
+def test_the_docs_give_each_standalone_fmus_size(standalone_fmus, version):
+    """docs/simulators.md names each file with its size; the README gives the one size of both."""
     size = standalone_fmus[version].stat().st_size / 1e6
     name = standalone_fmus[version].name
-    stated = re.search(rf"`build/{re.escape(name)}` \((\d+) MB\)", (REPO / "README.md").read_text())
-    assert stated, f"README.md gives no size of {name}"
+    text = (REPO / "docs" / "simulators.md").read_text()
+    stated = re.search(rf"`build/{re.escape(name)}` \((\d+) MB\)", text)
+    assert stated, f"docs/simulators.md gives no size of {name}"
     assert abs(int(stated.group(1)) - size) < 1, (stated.group(0), size)
+    both = re.search(r"`make fmu-standalone` into `build/` \((\d+) MB each", (REPO / "README.md").read_text())
+    assert both, "README.md gives no size of the standalone FMUs"
+    assert abs(int(both.group(1)) - size) < 1, (both.group(0), size)

@@ -1,4 +1,4 @@
-"""Faults in sweeps (issue 6): a worker killed in the middle of a sweep, a sweep killed outright.
+"""Faults in sweeps: a worker killed in the middle of a sweep, a sweep killed outright.
 
 A sweep must never lose a result. Each test runs ``piezo-fmu sweep`` (``python -m piezo_fmu_harness``) in
 a child process, as a user does, over a 4 x 4 grid of points of 1 s at a 0.1 ms step (about

@@ -1,4 +1,4 @@
-"""The survival curve and the escape-rate estimator of issue 31 on synthetic lifetimes whose law is
+"""The survival curve and the escape-rate estimator on synthetic lifetimes whose law is
 known: the estimator recovers the rate within its interval, its interval covers the true rate as
 often as it says, a plateau is found where there is one and only there; and an undecided start is
 never called chaotic without a plateau nor with a negative exponent."""
@@ -131,7 +131,7 @@ def _chunk(rng, persisting: bool, exponent: float, interval: float):
     (False, 0.3, 0.05, "undecided"),                 # starts still arriving: no plateau, no chaos
     (True, 0.3, 0.05, "chaotic"),                    # a plateau and an exponent above 0
     (True, 0.02, 0.05, "undecided"),                 # a plateau, but the exponent's interval holds 0
-    (True, -0.028, 0.005, "undecided (converging)"),  # start 0 of issue 31: converging, never chaos
+    (True, -0.028, 0.005, "undecided (converging)"),  # a start once called chaotic: converging, never chaos
     (False, -0.028, 0.005, "undecided (converging)"),
 ])
 def test_an_undecided_start_is_chaotic_only_on_a_plateau_with_a_positive_exponent(persisting, exponent, interval,

@@ -1,4 +1,4 @@
-"""The convergence table of docs/validation.md (Masri-Caughey, issue 20): the harness's
+"""The convergence table of docs/validation.md (Masri-Caughey): the harness's
 symmetric two-impact orbit through the FMU against the closed form, as the contact stiffens.
 
     python tools/masri_caughey_table.py

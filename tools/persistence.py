@@ -1,4 +1,4 @@
-"""Does every motion a study called chaotic persist under a march twice as long? (issue 31)
+"""Does every motion a study called chaotic persist under a march twice as long?
 
     python tools/persistence.py FOLDER [FOLDER ...] [--factor 2] [--no-progress]
 

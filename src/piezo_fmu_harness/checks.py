@@ -89,13 +89,14 @@ def load_value(model, value: float, option: str) -> float:
         raise UsageError(f"{option} {value:g}: {error}") from None
 
 
-def engine_damper(values: dict, batch, ratios, samples: int) -> None:
+def engine_damper(values: dict, batch, ratios=(), samples: int = 64) -> None:
     """The damper ``values`` (the FMU's defaults and ``--set``) forced at the study's frequencies
     ``ratios`` (``w / sqrt(K/M)``) with ``samples`` hold steps a period, refused before any work when the batch
     engine ``batch`` (the FMU's copy) says why the studies cannot take it: its contact's modes are
     not distinct to its closed form (two coincide, or their time scales lie too far apart), or the
-    FMU that checks the studies would refuse their hold steps. An older engine tests the contact
-    alone (``damper_error``), or nothing."""
+    FMU that checks the studies would refuse their hold steps. Without ``ratios`` (a study that is not
+    forced periodically) the contact alone is tested. An older engine tests the contact alone
+    (``damper_error``), or nothing."""
     if hasattr(batch, "study_error"):
         message = batch.study_error(values, [float(r) for r in ratios], samples)
     else:

@@ -1,31 +1,21 @@
-"""``piezo-fmu``: the nominal case, sweeps, the two designs, the load, the frequency response, its
-continuation and the optimiser, all through the FMU with fmpy.
+"""``piezo-fmu``: the piezo-impact damper's studies, each a command, run through its FMU with fmpy.
 
-    piezo-fmu nominal [--out DIR] [--stop-time S] [--step S] [--set NAME=VALUE ...]
-    piezo-fmu sweep (--grid NAME=START:STOP:COUNT ... | --preset NAME | --config FILE.toml)
-                    [--set NAME=VALUE ...] [--stop-time S] [--step S] [--out DIR] [--jobs N]
-                    [--scheduler ADDRESS | --dask-local] [--resume | --force] [--damping eq29|ls]
-    piezo-fmu two-designs [--out DIR] [--stop-time S] [--step S]
-    piezo-fmu load-sweep [--r-min OHM] [--r-max OHM] [--count N] [--models 1,2] [--set NAME=VALUE ...]
-                         [--stop-time S] [--step S] [--impact-step S] [--out DIR] [--jobs N]
-    piezo-fmu impact-voltage [--load OHM ...] [--models 0,1,2] [--step S] [--set NAME=VALUE ...] [--out DIR]
-    piezo-fmu frequency-response [--amplitude M | --acceleration M/S2] [--ratio-min R] [--ratio-max R] [--count N]
-                                 [--load OHM] [--voltage-model N] [--set NAME=VALUE ...] [--samples N]
-                                 [--tolerance TOL] [--max-cycles N] [--newton-iterations N] [--out DIR]
-                                 [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
-    piezo-fmu continuation [--parameter ratio|Y|NAME] [--range LO:HI] [--ratio R] [--max-points N]
-                           [--max-branches N] [frequency-response's band options] [--out DIR] [--jobs N]
-                           [--scheduler ADDRESS | --dask-local] [--force]
-    piezo-fmu optimize --param NAME=LO:HI ... [--objective perfectibility|forced] [--weight TERM=W ...]
-                       [--reference TERM=VALUE ...] [--damping eq29|ls] [--maxiter N] [--popsize N] [--seed N]
-                       [--polish] [--no-grid] [--sensitivity-step F] [frequency-response's band options]
-                       [--out DIR] [--jobs N] [--scheduler ADDRESS | --dask-local] [--resume | --force]
-    piezo-fmu presets
+    piezo-fmu COMMAND [options]      # results in results/COMMAND, or --out DIR
+    piezo-fmu COMMAND --help         # its options, each with its unit and default
+    piezo-fmu --version
 
-Values are SI (m, kg, s, V). Bad input (an unknown parameter, an empty or reversed range, a
-value outside the bounds of the FMU's modelDescription, an unwritable output folder) is
-reported before anything runs, with exit status 2. An interrupted sweep exits with 130 and
-keeps every finished point; run the same command with ``--resume`` to finish it.
+The commands (``piezo-fmu --help`` lists them, one line each): the paper's studies (``nominal``,
+``sweep``, ``two-designs``, ``load-sweep``, ``impact-voltage``), the forced response
+(``frequency-response``, ``continuation``), the studies of many starts on the batch engine
+(``bifurcation``, ``basins``, ``fractions``), the optimiser (``optimize``) and ``presets``.
+
+They share one convention (:mod:`piezo_fmu_harness.options`, docs/harness.md): values are SI (m,
+kg, s, V); ``--out DIR`` refuses a folder that holds another run unless ``--force``; a long command
+takes ``--resume`` (finish the run recorded in ``--out``), ``--no-progress`` and ``--jobs``, and
+``--scheduler`` or ``--dask-local`` where its work is tasks. Bad input (an unknown parameter, an
+empty or reversed range, a value outside the bounds of the FMU's modelDescription, an unwritable or
+occupied output folder) is reported before anything runs, with exit status 2. An interrupted run
+exits with 130 and keeps what it recorded; the same command with ``--resume`` finishes it.
 """
 
 from __future__ import annotations
@@ -38,13 +28,40 @@ from .checks import PROG
 from .spec import UsageError
 
 
+def version() -> str:
+    """The installed package's version (``unknown`` when it runs from a source tree not installed)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        return installed("piezo-fmu")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+class _OneLineEach(argparse.RawDescriptionHelpFormatter):
+    """argparse's formatter, with each command's help on its name's line: argparse measures the
+    commands' names two columns short of where it prints them, and a name as long as
+    ``frequency-response`` then takes a line of its own."""
+
+    def add_argument(self, action) -> None:
+        super().add_argument(action)
+        if isinstance(action, argparse._SubParsersAction):
+            longest = max(len(name) for name in action.choices)
+            self._action_max_length = max(self._action_max_length, longest + self._current_indent + 4)
+
+
 def _parser() -> argparse.ArgumentParser:
     """The parser: each study adds its subcommands (:data:`piezo_fmu_harness.studies.REGISTRY`)."""
     from .studies import REGISTRY
 
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser = argparse.ArgumentParser(
+        prog=PROG, description=" ".join(__doc__.split("\n\n")[0].replace("``", "").split()),
+        epilog=f"Each command writes its results in results/COMMAND unless --out DIR says\notherwise; "
+               f"'{PROG} COMMAND --help' lists its options, each with its unit\nand default.",
+        formatter_class=lambda prog: _OneLineEach(prog, max_help_position=26))
+    parser.add_argument("--version", action="version", version=f"{PROG} {version()}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands")
     for register in REGISTRY:
         register(commands)
     return parser

@@ -1,6 +1,6 @@
 """The drawing helpers every study shares: a figure made without pyplot
 (``matplotlib.figure.Figure``, written by the Agg canvas, so nothing is registered or left to
-close), written to PNG, the resolution, a load in Ohm as text, and :class:`Rendering`, which draws
+close), written to PNG, the resolution, the frequency axis's label, a load in Ohm as text, and :class:`Rendering`, which draws
 a study's figures in forked processes while the study goes on. Each study's figures are in its
 own package.
 """
@@ -39,6 +39,10 @@ def ohms(value: float, unit: str = "Ω") -> str:
 
 #: Resolution of every PNG.
 DPI = 130
+#: The label of every frequency axis: the forcing frequency over the main mass's natural frequency.
+FREQUENCY = r"frequency $\omega / \omega_n$, $\omega_n = \sqrt{K/M}$"
+#: The same ratio in a title or a legend.
+RATIO = r"$\omega / \omega_n$"
 
 
 class Rendering:

@@ -52,8 +52,8 @@ METRIC_UNITS = {
 #: End-of-run outputs (J) a point's record also carries when the FMU declares them: the energy
 #: harvested in the loads (voltage_model 1 and 2), in total and per barrier.
 ENERGY_OUTPUTS = ("harvested_energy", "harvested_energy_left", "harvested_energy_right")
-#: Metrics a point's record also carries when the FMU declares them (FMUs built before issue 13
-#: lack them), under the harness's names: the robust damping inclination DI_ls (m/s).
+#: Metrics a point's record also carries when the FMU declares them (older FMUs lack them), under the
+#: harness's names: the robust damping inclination DI_ls (m/s).
 OPTIONAL_METRICS = {"DI_ls": "damping_inclination_ls"}
 
 
@@ -137,7 +137,10 @@ class FmuModel:
         self.inputs: dict[str, int] = {}
         #: Calculated parameters (fixed after initialization), as ``(type, valueReference)``.
         self.calculated: dict[str, tuple[str, int]] = {}
+        #: The unit of every variable (None for a number without one), by name.
+        self.units: dict[str, Optional[str]] = {}
         for variable in self.model_description.modelVariables:
+            self.units[variable.name] = variable.unit or (variable.declaredType.unit if variable.declaredType else None)
             if variable.causality == "parameter":
                 self.parameters[variable.name] = Parameter(
                     name=variable.name, type=variable.type, value_reference=variable.valueReference,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 from fmpy import simulate_fmu
@@ -45,8 +46,11 @@ def metrics_at_end(series: np.ndarray) -> dict:
     }
 
 
-def write_csv(path: Path, columns: dict) -> None:
-    """A plain CSV with a header row; numbers to 12 significant digits, SI units."""
-    names = list(columns)
-    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
+def write_csv(path: Path, columns: dict, units: Optional[dict] = None) -> None:
+    """A plain CSV with a header row, each column named with its unit (``units``: name -> unit;
+    :func:`piezo_fmu_harness.datasets.with_units`); numbers to 12 significant digits, SI units."""
+    from .datasets import with_units
+
+    names = [with_units(name, (units or {}).get(name)) for name in columns]
+    table = np.column_stack([np.asarray(column, dtype=float) for column in columns.values()])
     np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.12g")

@@ -9,11 +9,17 @@ finished point is recomputed or lost.
 Any other line that is not a record of the run (not JSON, not an object, without the fields the
 study reads, or of another run: each study's check says) stops the run before anything is
 written, naming the file and the line: nothing recorded is lost or overwritten.
+
+**The rule of a results folder**, every command's: a folder that holds another run is refused
+unless ``--force``, which replaces it. A long command records as it goes and checks its folder with
+:func:`open_folder` (``--resume`` finishes the run it holds); a short one writes at its end and
+checks it with :func:`claim_folder`.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Callable, Optional
@@ -152,6 +158,18 @@ class PointStore:
             self.path.unlink()
 
 
+def jsonable(value):
+    """``value`` with every number that is not finite as null: JSON has no NaN, and a record is
+    written strictly."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {key: jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(item) for item in value]
+    return value
+
+
 def _record(line: bytes, check: Optional[Callable[[dict], None]]) -> dict:
     """One line of a points file as a record, or :class:`Damaged` saying why it is none."""
     try:
@@ -216,3 +234,19 @@ def open_folder(folder: Path, header_file: str, header: dict, same: tuple, resum
     else:
         start_over = True  # no header: a fresh run
     return folder, done, start_over
+
+
+def claim_folder(folder: Path, written: tuple, force: bool, what: str, option: str = "--out") -> Path:
+    """The results folder of a command that writes its results at its end (no ``--resume``):
+    created and proven writable; a folder that holds any file the command writes (the names or
+    glob patterns ``written``) holds another run, refused unless ``force``, which removes those
+    files. ``what`` names the run in the message. Raises :class:`UsageError` naming the option."""
+    folder = prepare_output_dir(folder, option)
+    held = sorted({path for pattern in written for path in folder.glob(pattern) if path.is_file()})
+    if held and not force:
+        shown = ", ".join(path.name for path in held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+        raise UsageError(f"{option} {folder} already holds a {what} ({shown}); nothing was changed; pass --force to "
+                         "replace it, or choose another folder")
+    for path in held:
+        path.unlink()
+    return folder

@@ -1,4 +1,4 @@
-"""Whether a start's trajectory goes to the orbit Newton found from it (issue 26).
+"""Whether a start's trajectory goes to the orbit Newton found from it.
 
 **The rule.** The motion reported for a start (a sweep's next frequency, a continuation seed, a
 basin cell) is the one its trajectory reaches. Newton on ``P^n(x) - x`` from a marched state

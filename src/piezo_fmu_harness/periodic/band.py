@@ -149,6 +149,21 @@ def solve_chain(instance: Instance, points, settings: Settings) -> list[dict]:
     return records
 
 
+#: What each option that caps the periods of a study means (:mod:`piezo_fmu_harness.options`).
+CAPS = {"--cycles-per-frequency": "the forcing periods simulated at one frequency",
+        "--max-cycles": "the budget of periods a start is marched"}
+
+
+def cap_option(args) -> str:
+    """The option that caps the periods of the study ``args`` asks for: the forced response's
+    ``--cycles-per-frequency``, or the studies of many starts' budget ``--max-cycles``."""
+    return "--cycles-per-frequency" if hasattr(args, "cycles_per_frequency") else "--max-cycles"
+
+
+def given_cap(args) -> Optional[int]:
+    return getattr(args, cap_option(args)[2:].replace("-", "_"), None)
+
+
 def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searched: tuple = ()):
     """The study the options ask for, checked (values, ranges, and the FMU's own checks);
     ``searched`` parameters (the optimiser's) are left out of the FMU's checks. ``defaults``: the
@@ -165,7 +180,7 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
                              f"it cannot be set (the settable parameters exclude {', '.join(STATE_PARAMETERS)})")
         if name in ("R_load", "voltage_model"):
             raise UsageError(f"--set {name}: give the load and the voltage model with --load and --voltage-model")
-    if args.acceleration is not None:
+    if getattr(args, "acceleration", None) is not None:
         amplitude, acceleration = None, positive(args.acceleration, "--acceleration", "the base acceleration "
                                                   "amplitude A", "m/s^2")
     else:
@@ -191,9 +206,10 @@ def frequency_spec(args, model, instance, defaults: Optional[dict] = None, searc
     if not (math.isfinite(tolerance) and 0 < tolerance <= 1e-2):
         raise UsageError(f"--tolerance {tolerance:g}: the steady-state tolerance (relative to Y) must lie in "
                          "(0, 0.01]")
-    cycles = whole(cap if args.max_cycles is None else args.max_cycles, "--max-cycles", 10,
-                    "the cap on forcing cycles per frequency must be at least 10")
-    newton = whole(defaults.newton_iterations if args.newton_iterations is None else args.newton_iterations,
+    cycles = whole(cap if given_cap(args) is None else given_cap(args), cap_option(args), 10,
+                    f"{CAPS[cap_option(args)]} must be at least 10")
+    iterations = getattr(args, "newton_iterations", None)
+    newton = whole(defaults.newton_iterations if iterations is None else iterations,
                     "--newton-iterations", 0, "the Newton iterations cannot be negative")
     parameter = model.parameters["voltage_model"]
     try:

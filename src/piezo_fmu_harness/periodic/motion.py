@@ -20,7 +20,7 @@ otherwise ``quasi-periodic`` (an invariant circle in the section, the exponent z
 ``strongly modulated`` when the amplitude swings by more than :data:`STRONG` of its largest value.
 A transient that contracts more slowly than 1% a period reads as quasi-periodic over the window.
 
-**A class from one window is a hint, not a verdict** (issue 31): a chaotic transient has a positive
+**A class from one window is a hint, not a verdict**: a chaotic transient has a positive
 exponent too, and one trajectory marched to a cap cannot show that its motion persists. The
 frequency response and the continuation's seeds report such a motion as :func:`undecided`, keeping
 the window's class beside it; the studies of many starts call a motion chaotic only once the

@@ -33,7 +33,7 @@ remembered as rejected, and marching goes on. An orbit found by marching alone i
 trajectory's own and needs no such check.
 
 **Undecided.** When the cap on simulated cycles is reached with no stable orbit, the motion is
-reported as undecided (issue 31: the cap is a budget, not a verdict; one trajectory cannot show
+reported as undecided (the cap is a budget, not a verdict; one trajectory cannot show
 that a motion persists, and at 0.85 ``w_n`` a sweep down reaches its orbit only at about period
 340-450), with measures over a window of ``window_cycles`` forcing periods marched on from where the
 search stood: the amplitude envelope (the smallest and largest half peak-to-peak of one period), the

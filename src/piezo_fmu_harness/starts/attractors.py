@@ -10,7 +10,7 @@ one list per drive (``group``):
   states agree (a point of one within :data:`SAME` of ``Y`` of a point of the other): an
   asymmetric orbit and its mirror image stay two attractors;
 - the motion without impacts is one attractor per drive (the family where the impact mass rests);
-- the starts that reach no orbit within the budget of periods (issue 31) are **undecided**, never
+- the starts that reach no orbit within the budget of periods are **undecided**, never
   folded into an attractor, unless the drive's survival curve shows that what is left persists
   (:func:`piezo_fmu_harness.starts.transients.escape`: a plateau, the transient died out, the
   curve flat at its end). Then a start is **chaotic** when its largest Lyapunov exponent is positive
@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from ..wording import per_cycle
 from .transients import counts, escape
 
 #: Two orbit records of one drive are the same attractor when a section state of one lies within
@@ -221,7 +222,7 @@ def base_name(attractor: dict) -> str:
     """The name of an attractor's kind: "order n, k impacts/cycle", "no impacts", or the class of a
     motion that is not periodic."""
     if attractor["kind"] == "orbit":
-        return f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle"
+        return f"order {attractor['order']}, {per_cycle(attractor['impacts_per_cycle'])}"
     if attractor["kind"] in ("chaotic", "quasi-periodic"):
         return f"{attractor['kind']} (persists)"
     return attractor["kind"]

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from ..store import Damaged, PointStore, require
+from ..wording import counted
 
 #: Chunks a study's starts are split into (the batch engine is the faster a start the more starts
 #: it marches at once, and a few chunks a worker keep the workers busy to the end) ...
@@ -81,7 +82,7 @@ def execute(what: str, tasks: list, folder: Path, done: dict, start_over: bool, 
 
     from ..checks import PROG
 
-    print(f"{PROG} {what}: {total} starts on the batch engine ({device}), in chunks on {backend.description}",
+    print(f"{PROG} {what}: {counted(total, 'start')} on the batch engine ({device}), in chunks on {backend.description}",
           file=sys.stderr)
     if start_over:
         PointStore(folder).clear()
@@ -97,7 +98,8 @@ def execute(what: str, tasks: list, folder: Path, done: dict, start_over: bool, 
                 bar.update(len(record["starts"]))
     except KeyboardInterrupt:
         bar.close()
-        print(f"\n{PROG} {what}: interrupted; {sum(len(r['starts']) for r in done.values())} starts are saved; run "
+        print(f"\n{PROG} {what}: interrupted; {counted(sum(len(r['starts']) for r in done.values()), 'start')} "
+              "saved; run "
               "the same command with --resume", file=sys.stderr)
         return False
     bar.close()

@@ -13,7 +13,7 @@ sections:
 - the motion **without impacts**: no contact onset in the window, and the impact mass at rest
   (``q' = 0``: after an impact it never is again);
 - otherwise, at the cap, **on no orbit**: the drive's record of that kind (chaotic, quasi-periodic
-  or undecided; the study's own for this start when it gave one, issue 31). One trajectory of the
+  or undecided; the study's own for this start when it gave one). One trajectory of the
   FMU cannot show that a motion persists (that takes the survival of many starts): it agrees with
   the study that the start is on no orbit within the march. It is classified through the FMU too
   (:func:`piezo_fmu_harness.periodic.motion.classify`), and the class is reported beside the

@@ -1,5 +1,5 @@
-"""How long the starts take to settle, and whether what is left when the budget runs out persists
-(issue 31): the survival curve of the unresolved starts, the escape rate of a chaotic transient, the
+"""How long the starts take to settle, and whether what is left when the budget runs out persists:
+the survival curve of the unresolved starts, the escape rate of a chaotic transient, the
 mean transient lifetime with its 95% interval, and the plateau.
 
 A start is **resolved** at the period its trajectory was seen reaching an orbit (or the motion
@@ -25,7 +25,7 @@ ratio within the chi-square(1) quantile 3.84); the mean transient lifetime is ``
   resolved after the onset at all, the lifetime's 95% lower bound ``E / 3.69`` (``E`` the periods
   at risk) is at least :data:`REACH` budgets (19.5): at the slowest escape the data allow, a start
   still on the motion at the budget leaves it within a march as long again with odds below one in
-  :data:`PURE` (``1 - exp(-1 / REACH) = 1 / PURE``). A march twice as long (the check of issue 31)
+  :data:`PURE` (``1 - exp(-1 / REACH) = 1 / PURE``). A march twice as long (``tools/persistence.py``)
   then finds it still there but for those odds;
 - the transient has died out: the fit, at its slowest rate (the interval's low end), leaves fewer
   than one in :data:`PURE` of the unresolved starts still on the transient at the budget;

@@ -10,7 +10,7 @@ in :data:`REGISTRY`.
 
 from __future__ import annotations
 
-from . import basins, bifurcation, continuation, forced, fractions, load, nominal, optimize, sweep, two_designs
+from . import basins, bifurcation, continuation, forced, fractions, load, nominal, optimize, random, sweep, two_designs
 
 #: The subcommands, in the order ``piezo-fmu --help`` lists them.
 REGISTRY = (
@@ -23,6 +23,7 @@ REGISTRY = (
     bifurcation.register,
     basins.register,
     fractions.register,
+    random.register,
     optimize.register,
     sweep.register_presets,
 )

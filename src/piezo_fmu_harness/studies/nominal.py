@@ -62,7 +62,8 @@ def run_nominal(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float = DEF
     columns["main_displacement_without_damper"] = without_damper["main_displacement"]
     columns["main_velocity_without_damper"] = without_damper["main_velocity"]
     files = {"timeseries": out / "timeseries.csv", "summary": out / "summary.json"}
-    write_csv(files["timeseries"], columns)
+    write_csv(files["timeseries"], columns, {**model.units, "time": "s", "main_displacement_without_damper": "m",
+                                             "main_velocity_without_damper": "m/s"})
 
     changed = ", ".join(f"{k} = {v:g}" for k, v in overrides.items())
     title = f"{'nominal' if not changed else 'nominal with ' + changed}, {stop_time:g} s"
@@ -127,15 +128,19 @@ def nominal_figures(t, with_damper: dict, without_damper: dict, folder: Path, ti
     return [a, save_png(fig, Path(folder) / "fig3b.png")]
 
 
+#: The files ``nominal`` writes.
+FILES = ("timeseries.csv", "summary.json", "fig3a.png", "fig3b.png")
+
+
 def command(args) -> int:
-    from ..spec import prepare_output_dir
+    from ..store import claim_folder
 
     model = open_model(args)
     overrides = assignments(model, args.set)
     stop_time, step = times(args, NOMINAL_STEP)
-    out = prepare_output_dir(args.out)
     unzipdir, instance = preflight(model, [overrides], "--set")
     try:
+        out = claim_folder(args.out, FILES, args.force, "nominal run")
         summary = run_nominal(model, out, stop_time, step, overrides, instance=instance)
     finally:
         instance.free()
@@ -148,6 +153,8 @@ def register(commands) -> None:
     """``piezo-fmu nominal``."""
     from ..options import time_series
 
-    nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series, summary, figures")
+    nominal = commands.add_parser("nominal", help="the nominal case (Fig. 3): time series and figures",
+                                  description="Run the nominal case (Table 1, released 10 mm from rest) through the "
+                                              "FMU, with and without the damper. Writes " + ", ".join(FILES) + ".")
     time_series(nominal, "nominal")
     nominal.set_defaults(run=command)

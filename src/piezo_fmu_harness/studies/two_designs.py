@@ -16,6 +16,7 @@ from ..drawing import new_figure, save_png
 from ..fmu import FmuModel, Instance, discard
 from ..series import NOMINAL_STEP, metrics_at_end, simulate_series, write_csv
 from ..spec import DEFAULT_STOP_TIME, UsageError
+from ..wording import counted
 
 DESIGNS = {
     "designed": {"x1": 0.010, "m": 0.2, "d": 0.010},
@@ -64,11 +65,12 @@ def run_two_designs(model: FmuModel, out: Path = DEFAULT_OUT, stop_time: float =
     files = {"table": out / "two_designs.md", "json": out / "two_designs.json",
              "timeseries": out / "two_designs.csv"}
     files["table"].write_text(markdown_table(result))
-    columns = {"time": series["designed"]["time"]}
+    columns, units = {"time": series["designed"]["time"]}, {"time": "s"}
     for name, s in series.items():
         for output in ("main_displacement", "voltage_left", "voltage_right", "voltage_rms", "impact_count"):
             columns[f"{output}_{name}"] = s[output]
-    write_csv(files["timeseries"], columns)
+            units[f"{output}_{name}"] = model.units.get(output)
+    write_csv(files["timeseries"], columns, units)
 
 
     labels = {f"{name} (x1 = {d['x1'] * 1e3:g} mm, m = {d['m']:g} kg, d = {d['d'] * 1e3:g} mm)": series[name]
@@ -110,11 +112,17 @@ def markdown_table(result: dict) -> str:
         *rows,
         "",
         "DI is eq. 29 (first two positive maxima of the main mass); V_rms is eq. 30 over the completed impacts.",
-        "Absolute voltages from eqs. 25-28 with Table 1 come out one to two orders of magnitude above the",
-        "paper's few volts (docs/model.md section 8: its unit handling is not recoverable); DI and the ratios",
-        "between the designs are the comparable part.",
+        f"Absolute voltages from eqs. 25-28 with Table 1 come out {_voltage_factors(d)} times the paper's",
+        "(docs/model.md section 8: its unit handling is not recoverable); DI and the ratios between the",
+        "designs are the comparable part.",
         "",
     ])
+
+
+def _voltage_factors(designs: dict) -> str:
+    """Our V_rms over the paper's, the smallest and the largest over the designs, as said."""
+    factors = sorted(design["ours"]["V_rms_V"] / design["paper"]["V_rms_V"] for design in designs.values())
+    return f"{factors[0]:.0f}" if round(factors[0]) == round(factors[-1]) else f"{factors[0]:.0f} to {factors[-1]:.0f}"
 
 
 def summary_lines(result: dict) -> list[str]:
@@ -123,7 +131,7 @@ def summary_lines(result: dict) -> list[str]:
     for name, design in result["designs"].items():
         ours, paper = design["ours"], design["paper"]
         lines.append(f"  {name:8s} DI {ours['DI_cm_per_s']:.4f} cm/s (paper {paper['DI_cm_per_s']}), "
-                     f"V_rms {ours['V_rms_V']:.4g} V (paper {paper['V_rms_V']}), {ours['impact_count']} impacts")
+                     f"V_rms {ours['V_rms_V']:.4g} V (paper {paper['V_rms_V']}), {counted(ours['impact_count'], 'impact')}")
     lines.append(f"  ratios   DI {p['ours']['DI']:.2f} (paper {p['paper']['DI']:.2f}), "
                  f"V_rms {p['ours']['V_rms']:.2f} (paper {p['paper']['V_rms']:.2f})")
     lines.append(f"  files in {Path(result['files']['table']).parent}")
@@ -149,8 +157,12 @@ def two_designs_figure(t, runs: dict, folder: Path, title: str) -> Path:
     return save_png(fig, Path(folder) / "fig10.png")
 
 
+#: The files ``two-designs`` writes.
+FILES = ("two_designs.md", "two_designs.json", "two_designs.csv", "fig10.png")
+
+
 def command(args) -> int:
-    from ..spec import prepare_output_dir
+    from ..store import claim_folder
 
     model = open_model(args)
     overrides = assignments(model, args.set)
@@ -158,10 +170,10 @@ def command(args) -> int:
     if clash:
         raise UsageError(f"--set {clash[0]}: x1, m and d are what the two designs differ by; they cannot be set")
     stop_time, step = times(args, NOMINAL_STEP)
-    out = prepare_output_dir(args.out)
     unzipdir, instance = preflight(model, [{**overrides, **d} for d in DESIGNS.values()], "two designs")
     instance.free()
     discard(unzipdir)
+    out = claim_folder(args.out, FILES, args.force, "run of the two designs")
     result = run_two_designs(model, out, stop_time, step, overrides)
     print("\n".join(summary_lines(result)))
     return 0
@@ -171,6 +183,9 @@ def register(commands) -> None:
     """``piezo-fmu two-designs``."""
     from ..options import time_series
 
-    two = commands.add_parser("two-designs", help="the designed and the poor damper (Fig. 10) beside the paper")
+    two = commands.add_parser("two-designs", help="a designed damper against a poor one (Fig. 10)",
+                              description="Run the designed damper (x1 = 10 mm, m = 0.2 kg, d = 10 mm) and the poor "
+                                          "one (x1 = 30 mm, m = 0.02 kg, d = 3 mm) through the FMU and put the paper's "
+                                          "numbers beside ours. Writes " + ", ".join(FILES) + ".")
     time_series(two, "two-designs")
     two.set_defaults(run=command)

@@ -34,6 +34,18 @@ def checked(params: Parameters, model: BatchModel, drives, states, group, sides,
     samples = {drive.samples for drive in drives}
     if len(samples) != 1:
         raise ValueError(f"drives: samples {sorted(samples)} differ; allowed: one number of nodes a period for all")
+    states, sides, volts = checked_states(params, model, states, sides, volts)
+    n = states.shape[0]
+    group = np.zeros(n, dtype=np.int64) if group is None else np.asarray(group, dtype=np.int64)
+    if group.shape != (n,) or (n and (group.min() < 0 or group.max() >= len(drives))):
+        raise ValueError(f"group: one index in [0, {len(drives) - 1}] per trajectory ({n}) is needed")
+    return drives, states, group, sides, volts
+
+
+def checked_states(params: Parameters, model: BatchModel, states, sides, volts) -> tuple:
+    """The starts of an ensemble, checked: ``(states, sides, volts)`` as host arrays ((n, 4), (n,),
+    (2, n)), ``sides`` free and ``volts`` zeros when not given; the impact mass inside the gap when
+    free, at or beyond the barrier it touches in contact, every value finite."""
     states = np.asarray(states, dtype=float)
     if states.ndim != 2 or states.shape[1] != 4:
         raise ValueError(f"states: shape {states.shape}; allowed shape (n, 4): p, p', q, q' of each trajectory")
@@ -54,11 +66,8 @@ def checked(params: Parameters, model: BatchModel, drives, states, group, sides,
                          f"allowed range {allowed} (the impact mass inside the gap when free, at or beyond "
                          f"the barrier it touches in contact), every value finite; {int(bad.sum())} of {n} "
                          f"starts are not")
-    group = np.zeros(n, dtype=np.int64) if group is None else np.asarray(group, dtype=np.int64)
-    if group.shape != (n,) or (n and (group.min() < 0 or group.max() >= len(drives))):
-        raise ValueError(f"group: one index in [0, {len(drives) - 1}] per trajectory ({n}) is needed")
     volts = np.zeros((2, n)) if volts is None else np.asarray(volts, dtype=float).reshape(2, n)
-    return drives, states, group, sides, volts
+    return states, sides, volts
 
 
 class Ensemble:

@@ -211,6 +211,9 @@ class BatchModel:
     coupled: bool
     tau_e: float      # s, R C_p: the decay time of a patch's voltage between contacts (inf when its voltage
     #                   does not act back, voltage_model 0 and 1: the engine carries none, and R C_p may be 0)
+    K_eq: float       # N/m, the barrier's equivalent stiffness
+    C_eq: float       # N.s/m, the barrier's damping
+    C_p: float        # F, a patch's capacitance
 
     @classmethod
     def of(cls, params: Parameters) -> "BatchModel":
@@ -218,4 +221,5 @@ class BatchModel:
         barrier = damper.barrier
         return cls(params, FreeFlow.of(params.M, params.K, params.C), ContactFlow.of(damper), params.d / 2.0,
                    params.M, damper.M_contact, params.m, barrier.M_eq, params.K, params.C, damper.coupled,
-                   params.R_load * barrier.C_p if damper.coupled else math.inf)
+                   params.R_load * barrier.C_p if damper.coupled else math.inf, barrier.K_eq, params.C_eq,
+                   barrier.C_p)

@@ -1,5 +1,5 @@
 """``basins.png``: the attractor each start ends on, over the grid of starts, and beside it the
-transient's length: the periods each start took to reach its motion (issue 31; the budget where it
+transient's length: the periods each start took to reach its motion (the budget where it
 was left undecided), on a log scale: where the machine settles fast and where it rattles first."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...drawing import new_figure, save_png
+from ...drawing import RATIO, new_figure, save_png
 
 
 def draw(ds, path: Path) -> Path:
@@ -28,7 +28,7 @@ def draw(ds, path: Path) -> Path:
     ax.set_xlabel("initial velocity of the main mass p0' (m/s)")
     ax.set_ylabel("initial displacement p0 (mm)")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1)
-    ax.set_title(f"Basins of attraction at w/w_n = {ds.attrs['ratio']:g} (impact mass at rest in the middle)", fontsize=9)
+    ax.set_title(f"Basins of attraction at {RATIO} = {ds.attrs['ratio']:g} (impact mass at rest in the middle)", fontsize=9)
     periods = np.maximum(ds["periods"].values.astype(float), 1.0)  # a start labelled at once: drawn as 1
     mesh = right.pcolormesh(ds["dp0"].values, ds["p0"].values * 1e3, periods, shading="nearest", cmap="magma_r",
                             norm=LogNorm(vmin=1.0, vmax=max(2.0, float(periods.max()))))

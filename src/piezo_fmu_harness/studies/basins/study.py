@@ -1,4 +1,4 @@
-"""Basins of attraction (issues 23, 26, 27): which motion the machine reaches from where it starts,
+"""Basins of attraction: which motion the machine reaches from where it starts,
 at one frequency.
 
 A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the middle of the gap
@@ -6,7 +6,7 @@ A grid of initial states ``p0`` against ``p0'``, the impact mass at rest in the 
 engine (``piezo_fmu.solver.batch``) to the motion its own trajectory reaches (the rule of
 ``piezo_fmu.solver.batch.attractors.settle``): a stable orbit it is seen converging to, with its impact
 sequence, the motion without impacts once it provably never reaches a barrier again, or, after
-the budget of ``--max-cycles`` periods, **undecided** (issue 31: a cap is a budget, not a
+the budget of ``--max-cycles`` periods, **undecided** (a cap is a budget, not a
 verdict), unless the map's survival curve shows that what is left persists and the start's own
 exponent says chaotic or quasi-periodic (:func:`piezo_fmu_harness.starts.attractors.merge`). The
 periods each start took are the transient's length, mapped beside the basins. The grid is split into chunks
@@ -21,8 +21,8 @@ Files: ``basins.nc`` (``basin``: the attractor each start reaches, on ``p0 x dp0
 the coordinate ``attractor``; the periods it took; the attractors with their shares and 95%
 intervals, over ``attractor``), ``basins.csv`` (a row a start), ``summary.json`` (the budget, the
 shares, what stayed undecided, the survival fit: the mean transient lifetime with its interval and
-the plateau, the boundary's uncertainty, the checks), ``basins.png`` (the map and the transient's
-length).
+the plateau, the boundary's uncertainty, the checks, the times of the marching and of the checks),
+``basins.png`` (the map and the transient's length); ``basins.json`` and ``points.jsonl``.
 
 This study reads the simulation core's batch engine (``piezo_fmu.solver.batch``) besides the FMU,
 which checks it: the one exception, with the fractions and the bifurcation diagram, to the
@@ -40,10 +40,14 @@ import numpy as np
 
 from ...starts.attractors import boundary, merge, shares
 from ...starts.chunks import check_chunk, chunks
+from ...starts.fmu_checks import tally
 from ...starts.transients import counts, escape
 from ...store import open_folder, within
+from ...wording import per_cycle
 
 HEADER_FILE = "basins.json"
+#: The files a basin map writes besides its header and ``points.jsonl``.
+FILES = ("basins.nc", "basins.csv", "summary.json", "basins.png")
 #: The default grid: ``p0`` and ``p0'/w`` each from -2 to 2 times the main mass's linear amplitude,
 #: 101 x 101 starts.
 DEFAULT_SPAN, DEFAULT_COUNT = 2.0, 101
@@ -154,11 +158,13 @@ def payloads(spec: BasinSpec, found: list[dict], starts: dict):
     return make
 
 
-def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
-          marching: float) -> dict:
+def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, times: dict,
+          begin: float) -> dict:
+    """Write the map's files (:data:`FILES`); ``times``: ``marching_s`` and ``checking_s``;
+    ``begin``: when the command's work began (``time.perf_counter``), for ``wall_s``."""
     import xarray as xr
 
-    from ...datasets import save_dataset
+    from ...datasets import csv_frame, save_dataset, units_of
     from .figure import draw
 
     shape = spec.shape
@@ -195,24 +201,22 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
     save_dataset(ds, folder / "basins.nc")
     frame = ds.drop_dims("attractor").to_dataframe().reset_index().rename(columns={"basin": "attractor"})
     frame["attractor_name"] = np.array(names)[frame["attractor"].values]
-    frame.to_csv(folder / "basins.csv", index=False)
-    verdicts = [c["verdict"] for c in checks]
+    csv_frame(frame, units_of(ds)).to_csv(folder / "basins.csv", index=False)
     records = list(starts.values())
     fit = escape([min(r["periods"], spec.max_cycles) for r in records if r["label"] != -2],
                  [r["label"] >= 0 for r in records if r["label"] != -2], spec.max_cycles)
     undecided = sum(1 for r in records if str(r.get("motion", "")).startswith("undecided"))
-    report = {"ratio": spec.ratio, "starts": count, "grid": list(shape), "wall_s": wall,
-              "marching_wall_s": marching, "budget_periods": spec.max_cycles,
+    draw(ds, folder / "basins.png")
+    report = {"ratio": spec.ratio, "starts": count, "grid": list(shape), "wall_s": time.perf_counter() - begin,
+              **times, "budget_periods": spec.max_cycles,
               "undecided": {"starts": undecided, "share": undecided / count},
               "transients": counts(fit),
               "attractors": [_summary_row(row, name, relabel) for row, name in zip(rows, names)],
               "boundary": boundary(ds["basin"].values),
-              "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
-                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
+              "fmu_checks": {**tally(checks, times["checking_s"]),
                              "starts": [{**c, "study": relabel.get(c["study"]), "fmu": relabel.get(c["fmu"])}
                                         for c in checks]}}
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
-    draw(ds, folder / "basins.png")
     return report
 
 
@@ -234,7 +238,7 @@ def _distinct(names: list[str]) -> list[str]:
 
 def _name(attractor: dict) -> str:
     if attractor["kind"] == "orbit":
-        return (f"order {attractor['order']}, {attractor['impacts_per_cycle']:g} impacts/cycle, "
+        return (f"order {attractor['order']}, {per_cycle(attractor['impacts_per_cycle'])}, "
                 f"{1e3 * attractor['amplitude']:.2f} mm")
     if attractor["kind"] == "no impacts":
         return f"no impacts, {1e3 * attractor['amplitude']:.2f} mm"

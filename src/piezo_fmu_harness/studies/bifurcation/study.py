@@ -1,4 +1,4 @@
-"""The bifurcation diagram (issues 23, 27): at each frequency, after the transients, the Poincare
+"""The bifurcation diagram: at each frequency, after the transients, the Poincare
 (stroboscopic) samples of the main mass's displacement ``p`` and the impacts per cycle, swept up and
 down in frequency with the damper.
 
@@ -10,7 +10,7 @@ orbit within the budget ``--max-cycles`` gives the samples of its measuring wind
 :data:`SAMPLES` periods) and its class. The two sweeps are two chains of tasks of the sweep
 engine, a frequency a task, side by side (a progress bar follows them).
 
-**Chaotic only when it persists** (issue 31). One trajectory that has not reached an orbit when
+**Chaotic only when it persists**. One trajectory that has not reached an orbit when
 the budget runs out may be on a long chaotic transient. So each such point is marched again with a
 cloud of :data:`CLOUD` companions, its start with the velocities moved by ``1e-6`` of their size
 (random, seeded): a transient lets them escape at its rate, an attractor keeps them. The cloud is
@@ -25,15 +25,17 @@ it persists with an exponent near 0 and a line spectrum, and **undecided** other
 (converging)`` when its exponent lies below 0), with the cloud's mean transient lifetime where it
 has one.
 
-**The FMU checks the answer**: from the start of a sample of points (``--confirm`` of them, and one
-of each class and each orbit's order and impacts), the FMU is marched and must reach the motion the
-diagram gives (:mod:`piezo_fmu_harness.starts.destination`); ``summary.json`` lists each check.
+**The FMU checks the answer**: from the start of a sample of points (one of each class and each
+orbit's order and impacts, the soonest, and ``--confirm`` more: :mod:`.chains`), the FMU is marched
+and must reach the motion the diagram gives (:mod:`piezo_fmu_harness.starts.destination`);
+``summary.json`` lists each check. The sweeps are recorded as they go (:mod:`.chains`, ``--resume``).
 
 Files: ``bifurcation.nc`` (dims direction x omega x sample; the periods each point took and its
 cloud's lifetime), ``bifurcation.csv`` (a row a sample), ``points.json`` (the damper's values and each sweep's points: the
 start, the motion, the exponent's interval, the cloud's survival fit, the start-periods of each),
-``summary.json`` (the budget, the start-periods of the sweeps and of the clouds and the CPU seconds,
-the classes and where, the checks), ``bifurcation.png``.
+``summary.json`` (the budget, the times of the marching and of the checks, the start-periods of the
+sweeps and of the clouds and the CPU seconds, the classes and where, the checks), ``bifurcation.png``;
+``bifurcation.json`` and ``points.jsonl`` (:mod:`.chains`).
 
 This study reads the simulation core's batch engine besides the FMU, which checks it: the one
 exception, with the basins and the fractions, to the harness's rule that it reads nothing but the FMU.
@@ -54,6 +56,8 @@ from ...periodic.band import FrequencySpec
 from ...starts.transients import NONE_SEEN, ONSET, REACH
 
 DIRECTIONS = ("up", "down")
+#: The files a diagram writes besides its header and ``points.jsonl`` (:mod:`.chains`).
+FILES = ("bifurcation.nc", "bifurcation.csv", "points.json", "summary.json", "bifurcation.png")
 #: The diagram's defaults: 200 frequencies over 0.5 to 2 sqrt(K/M), a budget of 1000 periods each.
 DEFAULTS = {"ratios": (0.5, 2.0), "count": 200, "max_cycles": 1000, "fewest": 2}
 #: The classes of motion, in the order the summary lists them.
@@ -68,8 +72,9 @@ NUDGE = 1e-6
 SAMPLES = 40
 #: Periods between two looks at a sweep's trajectory.
 BLOCK = 20
-#: Points the FMU checks besides one of each kind of motion.
-DEFAULT_CONFIRM = 6
+#: Points the FMU checks besides one of each kind of motion (docs/harness.md: the checking then takes no
+#: longer than the marching).
+DEFAULT_CONFIRM = 2
 
 
 def cloud(state, omega: float, amplitude: float, seed: int) -> np.ndarray:
@@ -186,77 +191,6 @@ def follow(spec: dict):
     return next_tasks
 
 
-def run(spec: FrequencySpec, backend, device: str = "cpu", progress=None) -> tuple[list[dict], float]:
-    """Both sweeps on ``backend``, the two chains side by side, a frequency a task and each point's
-    cloud a task of its own (they need not wait for each other: the chain goes on from the point's
-    own trajectory), with a progress bar on stderr unless ``progress`` is False; returns the sweeps
-    (up first) and the wall time (s)."""
-    import sys
-
-    from tqdm import tqdm
-
-    begin = time.perf_counter()
-    plain = {"values": spec.values, "settings": asdict(spec.settings), "ratios": list(spec.ratios),
-             "natural": spec.natural, "amplitude": spec.amplitude, "acceleration": spec.acceleration, "device": device}
-    count = len(plain["ratios"])
-    points = {d: [None] * count for d in DIRECTIONS}
-    waiting = {}
-    tasks = [((d, 0), frequency, (plain, d, 0, [0.0, 0.0, 0.0, 0.0], 0.0)) for d in DIRECTIONS]
-    bar = tqdm(total=2 * count, unit="pt", desc="bifurcation", dynamic_ncols=True,
-               disable=(not progress) if progress is not None else None, file=sys.stderr)
-    try:
-        for tag, result in backend.run_tasks(tasks, follow(plain)):
-            direction, number = tag[:2]
-            if len(tag) == 3:
-                point, record = waiting.pop((direction, number))
-                points[direction][number] = judged(point, record, result)
-            elif result["record"] is not None:
-                waiting[(direction, number)] = (result["point"], result["record"])
-                continue
-            else:
-                points[direction][number] = result["point"]
-            bar.update(1)
-    finally:
-        bar.close()
-    return [{"direction": d, "points": points[d]} for d in DIRECTIONS], time.perf_counter() - begin
-
-
-def checks(spec: FrequencySpec, sweeps: list[dict], backend, count: int, seed: int) -> list[dict]:
-    """The FMU's checks of a sample of points (see the module's text): one point of each kind of
-    motion (the class, and for an orbit its order and impacts per cycle) and ``count`` more drawn at
-    random (seeded), among the points whose start has the impact mass free (the FMU starts only so)."""
-    from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
-
-    from ...starts.fmu_checks import confirm_task
-
-    points = [(j, k, p) for j, s in enumerate(sweeps) for k, p in enumerate(s["points"])
-              if p["status"] == "ok" and p["start_side"] == 0.0]
-    chosen, kinds = [], set()
-    for j, k, p in points:
-        key = (p["motion"], p["order"], p["impacts_per_cycle"] if p["motion"] == "periodic" else None)
-        if key not in kinds:
-            kinds.add(key)
-            chosen.append((j, k))
-    rng = np.random.default_rng(seed)
-    rest = [(j, k) for j, k, _ in points if (j, k) not in chosen]
-    chosen += [rest[i] for i in sorted(rng.choice(len(rest), size=min(count, len(rest)), replace=False))]
-    params = damper(spec.values)
-    payloads = []
-    for j, k in chosen:
-        p = sweeps[j]["points"][k]
-        drive = HarmonicHold(p["omega"], p["amplitude_Y"], 0.0, spec.settings.samples)
-        attractor = {**p["attractor"], "id": 0, "group": 0}
-        payloads.append({"index": j * len(spec.ratios) + k, "values": spec.values, "omega": p["omega"],
-                         "amplitude": p["amplitude_Y"], "samples": spec.settings.samples, "start": p["start"],
-                         "periods": p["periods"], "cap": spec.settings.max_cycles,
-                         "track": tracks(params, drive, [p["start"]], [0], [p["periods"]])[0],
-                         "attractors": [attractor], "study": 0, "direction": sweeps[j]["direction"],
-                         "ratio": p["ratio"], "motion": p["motion"]})
-    results = {r["index"]: r for _, r in backend.run_tasks([(q["index"], confirm_task, (q,)) for q in payloads])}
-    return [{**results[q["index"]], "direction": q["direction"], "ratio": q["ratio"], "motion": q["motion"]}
-            for q in payloads]
-
-
 def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
     import xarray as xr
 
@@ -288,29 +222,30 @@ def build_dataset(spec: FrequencySpec, sweeps: list[dict]):
                                                                       "its orbit (the budget when it did not)"}),
          "lifetime": (dims, lifetime, {"units": "periods", "long_name": "mean transient lifetime of the point's "
                                                                         "cloud, where it was on no orbit"})},
-        coords={"direction": list(DIRECTIONS), "omega": spec.omegas,
+        coords={"direction": list(DIRECTIONS),
+                "omega": ("omega", spec.omegas, {"units": "rad/s", "long_name": "forcing frequency"}),
                 "ratio": ("omega", np.array(spec.ratios), {"units": "1", "long_name": "w / sqrt(K/M)"})},
         attrs={"title": "piezo-impact damper: bifurcation diagram under harmonic base motion",
                "budget_periods": spec.settings.max_cycles, "cloud": CLOUD,
                "parameters": json.dumps(spec.values), "settings": json.dumps(asdict(spec.settings))})
 
 
-def summarize(ds, wall: float, checked: list[dict], sweeps: list[dict]) -> dict:
-    """The summary: the wall time and the work (start-periods marched by the sweeps' own trajectories
-    and by the clouds, with Newton's and the measures'; the CPU seconds of the points), the classes
-    and their bands, the FMU's checks."""
+def summarize(ds, times: dict, checked: list[dict], sweeps: list[dict]) -> dict:
+    """The summary: the times (``wall_s`` in all, ``marching_s`` of the sweeps and their clouds,
+    ``checking_s`` of the FMU's checks) and the work (start-periods marched by the sweeps' own
+    trajectories and by the clouds, with Newton's and the measures'; the CPU seconds of the points),
+    the classes and their bands, the FMU's checks."""
+    from ...starts.fmu_checks import tally
+
     ratios = ds["ratio"].values
     points = [p for s in sweeps for p in s["points"]]
-    verdicts = [c["verdict"] for c in checked]
     undecided = np.char.startswith(ds["motion"].values.astype(str), "undecided")
-    report = {"wall_s": wall, "cpu_s": sum(p["cpu_seconds"] for p in points),
+    report = {**times, "cpu_s": sum(p["cpu_seconds"] for p in points),
               "start_periods": {"sweeps": sum(p["start_periods"] for p in points),
                                 "clouds": sum(p.get("cloud_start_periods", 0) for p in points)},
               "points": int(ds["motion"].size), "budget_periods": int(ds.attrs["budget_periods"]),
               "undecided": int(undecided.sum()), "classes": {},
-              "fmu_checks": {"checked": len(checked), "agree": verdicts.count("agrees"),
-                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
-                             "points": checked}}
+              "fmu_checks": {**tally(checked, times["checking_s"]), "points": checked}}
     for j, direction in enumerate(DIRECTIONS):
         motion = ds["motion"].values[j]
         report["classes"][direction] = {kind: {"count": int((motion == kind).sum()), "bands": bands(ratios, motion == kind)}
@@ -318,17 +253,20 @@ def summarize(ds, wall: float, checked: list[dict], sweeps: list[dict]) -> dict:
     return report
 
 
-def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, wall: float, checked: list[dict]) -> dict:
-    from ...datasets import save_dataset
+def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, times: dict, checked: list[dict], begin: float) -> dict:
+    """Write the diagram's files (:data:`FILES`); ``times``: ``marching_s`` and ``checking_s``;
+    ``begin``: when the command's work began (``time.perf_counter``), for ``wall_s``."""
+    from ...datasets import csv_frame, save_dataset, units_of
     from .figure import draw
 
     ds = build_dataset(spec, sweeps)
+    draw(ds, folder / "bifurcation.png")
     save_dataset(ds, folder / "bifurcation.nc")
     frame = ds[["p_section"]].to_dataframe().dropna().reset_index()
-    frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),  # ratio is omega's: one column
-                on=["direction", "omega", "ratio"]).to_csv(folder / "bifurcation.csv", index=False)
-    report = summarize(ds, wall, checked, sweeps)
-    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    frame = frame.merge(ds[["impacts_per_cycle", "motion"]].to_dataframe().reset_index(),  # ratio is omega's: one
+                        on=["direction", "omega", "ratio"])
+    csv_frame(frame, units_of(ds)).to_csv(folder / "bifurcation.csv", index=False)
     (folder / "points.json").write_text(json.dumps({"values": spec.values, "sweeps": sweeps}) + "\n")
-    draw(ds, folder / "bifurcation.png")
+    report = summarize(ds, {"wall_s": time.perf_counter() - begin, **times}, checked, sweeps)
+    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

@@ -1,4 +1,4 @@
-"""Continuation (issue 23): the branches of periodic orbits of the forced response, followed
+"""Continuation: the branches of periodic orbits of the forced response, followed
 through their folds by pseudo-arclength continuation, with their stability and bifurcations
 (``piezo-fmu continuation``).
 
@@ -13,29 +13,27 @@ from __future__ import annotations
 
 def register(commands) -> None:
     """``piezo-fmu continuation``."""
-    from ...options import band_options, engine_once, model_options, results_folder
+    from ...options import band_options, model_options, ratio_option, results_options, work_options
     from . import study as cs
     from .tracer import Settings
 
     continuation = commands.add_parser(
-        "continuation", help="branches of periodic orbits followed through their folds, with their bifurcations",
+        "continuation", help="branches of periodic orbits through their folds",
         description="Seed with a sweep up and down (the frequency response's shooting, with the damper), then follow "
                     "every orbit with impacts by pseudo-arclength continuation in the frequency ratio (or Y, or a "
                     "damper parameter), through folds, naming the bifurcations (fold, period doubling, "
-                    "Neimark-Sacker, grazing). Writes continuation.nc, branches.csv, events.csv, summary.json and "
-                    "continuation.png.")
+                    f"Neimark-Sacker, grazing). Writes {', '.join(cs.FILES)}; what was asked goes to "
+                    "continuation.json and each sweep of the seeds and each branch to points.jsonl (--resume).")
     continuation.add_argument("--parameter", default="ratio", metavar="NAME",
                               help="the continued parameter: ratio (default), Y, or a Real damper parameter")
     continuation.add_argument("--range", default=None, metavar="LO:HI", help="its range (not for ratio)")
-    continuation.add_argument("--ratio", type=float, default=1.0, metavar="R",
-                              help="w / sqrt(K/M) held fixed when the parameter is not the ratio (default 1)")
+    ratio_option(continuation, "1; held fixed when the continued parameter is not the ratio", default=1.0)
     continuation.add_argument("--max-points", type=int, default=Settings().max_points, metavar="N",
                               help="points a branch may have in each direction (default %(default)s)")
     continuation.add_argument("--max-branches", type=int, default=cs.MAX_BRANCHES, metavar="N",
                               help="branches followed at most (default %(default)s)")
     band_options(continuation, cs.SEED_DEFAULTS)
     model_options(continuation)
-    results_folder(continuation, "continuation")
-    engine_once(continuation)
-    continuation.add_argument("--no-progress", action="store_true", help="(no progress bar is drawn)")
+    results_options(continuation, "continuation", resumable=True)
+    work_options(continuation)
     continuation.set_defaults(run=cs.command)

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...drawing import new_figure, save_png
+from ...drawing import FREQUENCY, new_figure, save_png
+from ...wording import counted
 
 #: Markers of the bifurcations.
 EVENT_STYLES = {
@@ -51,9 +52,9 @@ def draw(ds, chains: list[dict], path: Path) -> Path:
     ax.plot([], [], color="0.45", ls="--", lw=0.9, label="branch, unstable")
     ax.set_yscale("log")
     parameter = ds.attrs["parameter"]
-    ax.set_xlabel(r"frequency ratio $\omega / \sqrt{K/M}$" if parameter == "ratio" else f"{parameter} (SI)")
+    ax.set_xlabel(FREQUENCY if parameter == "ratio" else f"{parameter} (SI)")
     ax.set_ylabel("main mass amplitude (mm), half peak-to-peak")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=6.5, ncol=2)
-    ax.set_title(f"Continuation: {len(np.unique(ds['branch'].values))} branches of periodic orbits", fontsize=9)
+    ax.set_title(f"Continuation: {counted(len(np.unique(ds['branch'].values)), 'branch')} of periodic orbits", fontsize=9)
     return save_png(fig, path)

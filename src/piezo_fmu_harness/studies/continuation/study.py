@@ -1,4 +1,4 @@
-"""``piezo-fmu continuation`` (issue 23): the branches of periodic orbits of the forced response,
+"""``piezo-fmu continuation``: the branches of periodic orbits of the forced response,
 followed through their folds, with their stability and bifurcations.
 
 1. **Seeds.** A sweep up and a sweep down over ``--count`` values of the parameter (the frequency
@@ -28,6 +28,7 @@ import numpy as np
 
 from ...periodic.band import solve_chain
 from ...periodic.steady_state import Settings as SteadySettings
+from ...store import jsonable
 from .branches import distance_to_branch, trace_branch
 from .tracer import Problem, Settings
 
@@ -56,7 +57,7 @@ def seeds_of(chains: list[dict]) -> list[dict]:
         for record in chain["records"]:
             orbits = ([record] if record.get("settled") else []) + list(record.get("unstable_orbits") or ())
             for orbit in orbits:
-                if orbit.get("impacts_per_cycle", 0) > 0 and orbit.get("verdict") in ("stable", "unstable"):
+                if (orbit.get("impacts_per_cycle") or 0) > 0 and orbit.get("verdict") in ("stable", "unstable"):
                     seeds.append({"lam": record["lam"], "state": orbit["state"], "phase": orbit["phase"],
                                   "order": orbit["order"], "amplitude": orbit["amplitude"], "depth": 0,
                                   "impacts_per_cycle": orbit["impacts_per_cycle"],
@@ -77,20 +78,57 @@ class Continuation:
         self.skipped = 0
         self.seconds: dict = {}
 
-    def run(self, backend) -> None:
-        begin = time.perf_counter()
-        args = (asdict(self.problem), asdict(self.steady))
-        tasks = [(direction, seed_chain, (*args, lams, direction))
-                 for direction, lams in (("up", self.lams), ("down", self.lams[::-1]))]
-        self.chains = [result for _, result in backend.run_tasks(tasks)]
-        self.chains.sort(key=lambda chain: chain["direction"] != "up")
-        self.seconds["seeds"] = time.perf_counter() - begin
-        begin = time.perf_counter()
-        self.pending, self.running = seeds_of(self.chains), {}
-        first = [self._task() for _ in range(2)]
-        for _, branch in backend.run_tasks([task for task in first if task], self._follow):
-            pass
-        self.seconds["branches"] = time.perf_counter() - begin
+    def run(self, backend, recorded: tuple = (), log=None, progress=None) -> None:
+        """Seeds, then branches, on ``backend``, with a progress bar on stderr unless ``progress`` is
+        False. ``recorded``: the records of the tasks an earlier run of this study finished, in the
+        order they finished (:mod:`.journal`): they are replayed, not run again; ``log(record)``
+        keeps the record of each task as it finishes."""
+        import copy
+        import sys
+
+        from tqdm import tqdm
+
+        from ...spec import UsageError
+
+        log = log or (lambda record: None)
+        chains = {record["direction"]: record for record in recorded if record["index"] < 2}
+        branches = [record for record in recorded if record["index"] >= 2]
+        bar = tqdm(total=2, initial=len(chains), unit="task", desc="continuation", dynamic_ncols=True,
+                   disable=(not progress) if progress is not None else None, file=sys.stderr)
+        try:
+            begin = time.perf_counter()
+            args = (asdict(self.problem), asdict(self.steady))
+            tasks = [(direction, seed_chain, (*args, lams, direction))
+                     for direction, lams in (("up", self.lams), ("down", self.lams[::-1])) if direction not in chains]
+            for direction, result in backend.run_tasks(tasks):
+                chains[direction] = {"index": ("up", "down").index(direction), **result}
+                log(jsonable(chains[direction]))
+                bar.update(1)
+            self.chains = [chains["up"], chains["down"]]
+            self.seconds["seeds"] = time.perf_counter() - begin
+            begin = time.perf_counter()
+            self.pending, self.running = seeds_of(self.chains), {}
+            given = [task for task in (self._task(), self._task()) if task]
+            for record in branches:
+                if record["index"] - 1 not in self.running:
+                    raise UsageError(f"--resume: branch task {record['index'] - 1} of the record is not one this "
+                                     "study gives out at that point: a record of another run; nothing was changed; "
+                                     "use --force to start over (it discards the recorded points)")
+                given += self._follow(record["index"] - 1, copy.deepcopy(record["branch"]))
+            bar.total += len(given)
+            bar.update(len(branches))
+
+            def follow(tag, branch: dict) -> list:
+                log({"index": 1 + tag, "branch": jsonable(branch)})
+                more = self._follow(tag, branch)
+                bar.total += len(more)
+                return more
+
+            for _ in backend.run_tasks([task for task in given if task[0] in self.running], follow):
+                bar.update(1)
+            self.seconds["branches"] = time.perf_counter() - begin
+        finally:
+            bar.close()
 
     def _task(self):
         """The next seed to follow: not on a branch already followed, and not of the kind (order,
@@ -216,16 +254,24 @@ def summarize(study: Continuation) -> dict:
             "ends": [b["ends"] for b in study.branches]}
 
 
+#: The files a continuation writes besides its header and ``points.jsonl`` (:mod:`.journal`).
+FILES = ("continuation.nc", "branches.csv", "events.csv", "summary.json", "sweeps.jsonl", "continuation.png")
+
+
 def write(study: Continuation, folder: Path, parameter_units: str) -> list[Path]:
-    from ...datasets import save_dataset
+    from ...datasets import csv_frame, save_dataset, units_of
     from . import figure as continuation_figure
 
     ds = build_dataset(study, parameter_units)
     files = [folder / "continuation.nc", folder / "branches.csv", folder / "events.csv", folder / "summary.json",
              folder / "sweeps.jsonl"]
     save_dataset(ds, files[0])
-    ds.drop_dims("event").drop_vars(["multiplier_real", "multiplier_imag", "state"]).to_dataframe().to_csv(files[1])
-    ds.drop_dims(["point"]).to_dataframe().to_csv(files[2])
+    units = units_of(ds)
+    # a row a point, a row a bifurcation (the multipliers and the state stay in the NetCDF)
+    csv_frame(ds.drop_dims(["event", "coordinate", "multiplier"]).to_dataframe().reset_index(), units).to_csv(
+        files[1], index=False)
+    csv_frame(ds.drop_dims(["point", "coordinate", "multiplier"]).to_dataframe().reset_index(), units).to_csv(
+        files[2], index=False)
     files[3].write_text(json.dumps(summarize(study), indent=2) + "\n")
     with open(files[4], "w") as out:
         for chain in study.chains:
@@ -279,12 +325,17 @@ def parameter_range(model, args, spec) -> tuple[str, tuple, list, str]:
 
 
 def command(args) -> int:
+    import signal
+    import sys
+
     from ...fmu import discard
 
-    from ...checks import PROG, make_backend, open_model, positive, preflight, whole, worker_count
+    from ...checks import PROG, interrupt, make_backend, open_model, positive, preflight, whole, worker_count
     from ...engine import InProcess
     from ...periodic.band import frequency_spec
-    from ...spec import UsageError
+    from ...store import PointStore
+    from ...wording import counted
+    from . import journal
 
     model = open_model(args)
     jobs = worker_count(args)
@@ -292,32 +343,43 @@ def command(args) -> int:
     try:
         spec = frequency_spec(args, model, instance, SEED_DEFAULTS)
         parameter, bounds, lams, units = parameter_range(model, args, spec)
-        ratio = positive(args.ratio, "--ratio", "the frequency ratio w / sqrt(K/M) held fixed", "")
+        ratio = positive(args.ratio, "--ratio", "the frequency ratio w / w_n held fixed", "")
         settings = Settings(max_points=whole(args.max_points, "--max-points", 10,
                                              "need at least 10 points a direction"))
         branches = whole(args.max_branches, "--max-branches", 1, "need at least one branch")
         problem = Problem(values=spec.values, parameter=parameter, bounds=bounds, natural=spec.natural, ratio=ratio,
                           amplitude=spec.amplitude, acceleration=spec.acceleration, samples=spec.settings.samples,
                           tolerance=spec.settings.tolerance)
-        folder = Path(args.out)
-        if (folder / "continuation.nc").exists() and not args.force:
-            raise UsageError(f"--out {folder}: holds a continuation already; give --force to replace it")
-        folder.mkdir(parents=True, exist_ok=True)
         study = Continuation(problem, settings, spec.settings, lams, branches)
+        folder, done, start_over = journal.open_continuation(model, study, args.out, args.resume, args.force)
         backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
                    else make_backend(args, model, unzipdir, min(jobs, 2)))
+        if start_over:
+            PointStore(folder).clear()
+        (folder / journal.HEADER_FILE).write_text(json.dumps({**journal.header(study), "fmu_guid": model.guid},
+                                                             indent=2) + "\n")
+        previous = signal.signal(signal.SIGTERM, interrupt)
+        interrupted = True
         try:
-            study.run(backend)
+            with PointStore(folder) as store:
+                study.run(backend, tuple(done.values()), store.append, False if args.no_progress else None)
+            interrupted = False
+        except KeyboardInterrupt:
+            print(f"\n{PROG} continuation: interrupted; {counted(len(study.branches), 'branch')} and the seeds' sweeps "
+                  f"are saved in {folder / 'points.jsonl'}; run the same command with --resume to finish",
+                  file=sys.stderr)
+            return 130
         finally:
-            backend.close()
+            signal.signal(signal.SIGTERM, previous)
+            backend.close(cancel=interrupted)
     finally:
         instance.free()
         discard(unzipdir)
     write(study, folder, units)
     report = summarize(study)
-    print(f"{PROG} continuation in {parameter}: {report['branches']} branches, {report['points']} points, "
-          f"{report['evaluations']} runs of the period map ({report['seconds']['seeds']:.1f} s of seeds, "
-          f"{report['seconds']['branches']:.1f} s of branches)")
+    print(f"{PROG} continuation in {parameter}: {counted(report['branches'], 'branch')}, "
+          f"{counted(report['points'], 'point')}, {counted(report['evaluations'], 'run')} of the period map "
+          f"({report['seconds']['seeds']:.1f} s of seeds, {report['seconds']['branches']:.1f} s of branches)")
     for kind, where in report["events"].items():
         print(f"  {kind}: {len(where)} at {', '.join(f'{v:.4g}' for v in where)}")
     print(f"  results in {folder}")

@@ -1,4 +1,4 @@
-"""The frequency response (issue 13): the damper shaken at its base, swept up and down in
+"""The frequency response: the damper shaken at its base, swept up and down in
 frequency, with and without the damper, through the FMU.
 
 The base moves as ``y = Y sin(w t)``, ``Y`` given directly or as ``A / w^2`` for an acceleration

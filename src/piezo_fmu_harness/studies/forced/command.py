@@ -8,6 +8,7 @@ import sys
 from ...fmu import discard
 from ...checks import PROG, interrupt, make_backend, open_model, preflight, worker_count
 from ...spec import UsageError
+from ...wording import counted
 
 
 def frequency_response(args) -> int:
@@ -32,12 +33,12 @@ def frequency_response(args) -> int:
             if remaining:
                 backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
                            else make_backend(args, model, unzipdir, min(jobs, len(fr.CHAINS))))
-                print(f"{PROG} frequency-response: {remaining} of {run.total} points to run on {backend.description}",
+                print(f"{PROG} frequency-response: {remaining} of {counted(run.total, 'point')} to run on {backend.description}",
                       file=sys.stderr)
                 try:
                     fr.execute(run, backend, progress=False if args.no_progress else None)
                 except KeyboardInterrupt:
-                    print(f"\n{PROG} frequency-response: interrupted; {len(run.done)} of {run.total} points are saved "
+                    print(f"\n{PROG} frequency-response: interrupted; {len(run.done)} of {counted(run.total, 'point')} are saved "
                           f"in {run.folder / 'points.jsonl'}; run the same command with --resume to finish",
                           file=sys.stderr)
                     return 130

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...drawing import new_figure, save_png
+from ...drawing import FREQUENCY, new_figure, save_png
 
 
 #: Line styles of the frequency-response figures, by (damper, direction).
@@ -72,7 +72,7 @@ def _frequency_figure(ds, key: str, factor: float, label: str, cases: tuple, pat
     ax.plot([], [], ls="none", marker="o", mfc="none", color="0.3", label="undecided within the cap (hollow; bar: envelope)")
     if ds.sizes.get("unstable", 0):
         ax.plot([], [], ls="none", marker="x", ms=4, color="0.55", mew=0.8, label="unstable orbit met (never the response)")
-    ax.set_xlabel(r"frequency ratio $\omega / \sqrt{K/M}$")
+    ax.set_xlabel(FREQUENCY)
     ax.set_ylabel(label)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)

@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from ...datasets import bands
+from ...wording import counted
 from ...fmu import FmuModel
 from ...periodic.band import DAMPER_CASES, FrequencySpec, linear_transmissibility
 from .chains import BAND_TOLERANCE, CHAINS, DIRECTIONS, MEASURES, FrequencyRun
@@ -70,7 +71,7 @@ def build_dataset(spec: FrequencySpec, records: dict, model: FmuModel):
                                                                      "or missing"})
     variables["motion"] = (dims, motion.astype(str), {"long_name": "periodic (a stable orbit), undecided, "
                                                                    "or undecided (converging): its exponent says it "
-                                                                   "still contracts; never chaotic (issue 31)"})
+                                                                   "still contracts; never chaotic"})
     for part, values in (("real", multipliers.real), ("imag", multipliers.imag)):
         variables[f"multiplier_{part}"] = (dims + ("multiplier",), values,
                                            {"units": "1", "long_name": f"{part} part of the orbit's Floquet multipliers, "
@@ -224,7 +225,7 @@ def summary_lines(report: dict) -> list[str]:
         return f"{1e3 * value:.4g} mm"
 
     lines = [f"frequency response ({report['excitation']}; w_n = sqrt(K/M) = "
-             f"{report['natural_frequency_rad_per_s']:.4g} rad/s; {report['points']} points):"]
+             f"{report['natural_frequency_rad_per_s']:.4g} rad/s; {counted(report['points'], 'point')}):"]
     for key, peak in report["resonant_amplitude_m"].items():
         lines.append(f"  peak amplitude {key}: {mm(peak['amplitude_m'])} at w/w_n = {peak['at_ratio']:.4g} "
                      f"(transmissibility {peak['transmissibility']:.4g}, {peak['motion']})")
@@ -244,7 +245,7 @@ def summary_lines(report: dict) -> list[str]:
     unsettled = {key: values for key, values in report["undecided"].items() if values}
     for key, values in unsettled.items():
         lines.append(f"  undecided (no stable orbit reached within the cap; measured over a window) {key}: "
-                     f"{len(values)} points, at w/w_n " + ", ".join(f"{r} ({m})" for r, m in values.items()))
+                     f"{counted(len(values), 'point')}, at w/w_n " + ", ".join(f"{r} ({m})" for r, m in values.items()))
     for key, met in report["unstable_orbits_met"].items():
         if met["count"]:
             lines.append(f"  unstable orbits met and set aside {key}: {met['count']} "
@@ -274,7 +275,7 @@ def unstable_frame(ds):
 def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
     """Write the Dataset, the CSV, the summary and the figures (drawn in ``jobs`` processes), after
     return ``{"dataset", "summary", "files"}``."""
-    from ...datasets import save_dataset
+    from ...datasets import csv_frame, save_dataset, units_of
     from ...drawing import Rendering
     from .figures import frequency_figure_calls
 
@@ -284,9 +285,12 @@ def finish(model: FmuModel, run: FrequencyRun, jobs: int = 1) -> dict:
     files = [run.folder / "frequency_response.nc", run.folder / "frequency_response.csv", run.folder / "summary.json",
              run.folder / "unstable_orbits.csv"]
     save_dataset(ds, files[0])
-    tidy_frame(ds).to_csv(files[1], index=False)
+    units = units_of(ds)
+    csv_frame(tidy_frame(ds), {**units, **{f"multiplier_{k + 1}_{part}": "1" for k in range(4) for part in ("real", "imag")}}
+              ).to_csv(files[1], index=False)
     files[2].write_text(json.dumps(report, indent=2) + "\n")
-    unstable_frame(ds).to_csv(files[3], index=False)
+    csv_frame(unstable_frame(ds), {name.removeprefix("unstable_"): unit for name, unit in units.items()
+                                   if name.startswith("unstable_")}).to_csv(files[3], index=False)
     return {"dataset": ds, "summary": report, "files": files + rendering.wait()}
 
 

@@ -1,4 +1,4 @@
-"""Global stability across a band (issue 26): at each frequency, the share of random starts that
+"""Global stability across a band: at each frequency, the share of random starts that
 reach each attractor (``piezo-fmu fractions``).
 
 - :mod:`.study`: the starts on the batch engine, frequencies in chunks on the sweep engine, the
@@ -11,36 +11,31 @@ from __future__ import annotations
 
 def register(commands) -> None:
     """``piezo-fmu fractions``."""
-    from ...options import engine, many_start_options, model_options, results_folder
+    from ...options import (drive_options, frequency_options, many_start_options, model_options, results_options,
+                            work_options)
     from . import study
 
     fractions = commands.add_parser(
-        "fractions", help="global stability across a band: at each frequency, how likely each motion is",
+        "fractions", help="how likely each motion is, at each frequency",
         description="At each frequency of the band, march --starts random starts (the same draws at every "
                     "frequency: p0 and p0'/w_n uniform within +-SPAN, the impact mass at rest anywhere in the gap) "
                     "on the batch engine until each one's trajectory shows where it goes, and report the share of "
-                    "each attractor with its 95%% interval; attractors keep one name across the band. A start "
+                    "each attractor with its 95% interval; attractors keep one name across the band. A start "
                     "not resolved within the budget --max-cycles is undecided (chaotic only where the survival "
                     "curve shows that what is left persists); the mean transient lifetime is fitted at every "
-                    "frequency. The FMU checks one start of every attractor at every frequency and --confirm "
-                    "more. Writes fractions.nc/.csv, transients.csv, summary.json, fractions.png and "
-                    "transients.png; chunks of frequencies are appended to points.jsonl (--resume).")
-    amplitude = fractions.add_mutually_exclusive_group()
-    amplitude.add_argument("--amplitude", type=float, default=None, metavar="M",
-                           help="base displacement amplitude Y, m (default 1e-3)")
-    amplitude.add_argument("--acceleration", type=float, default=None, metavar="M/S2",
-                           help="base acceleration amplitude A, m/s^2 (then Y = A / w^2 at each frequency)")
-    for option, kind, metavar, text in (
-            ("--ratio-min", float, "R", f"lowest frequency, as w / sqrt(K/M) (default {study.DEFAULTS['ratios'][0]:g})"),
-            ("--ratio-max", float, "R", f"highest frequency, as w / sqrt(K/M) (default {study.DEFAULTS['ratios'][1]:g})"),
-            ("--count", int, "N", f"frequencies, evenly spaced (default {study.DEFAULTS['count']})"),
-            ("--starts", int, "N", f"random starts at each frequency (default {study.DEFAULT_STARTS})"),
-            ("--span", float, "M", "half-width of the starts' p0 (m; p0' within +-SPAN sqrt(K/M)); default the gap d")):
-        fractions.add_argument(option, type=kind, default=None, metavar=metavar, help=text)
-    many_start_options(fractions, study.DEFAULTS["max_cycles"], study.DEFAULT_CONFIRM, "at each frequency")
+                    "frequency. The FMU checks one start of every attractor across the band and --confirm random "
+                    f"starts more. Writes {', '.join(study.FILES)}; what was asked goes to fractions.json and the "
+                    "chunks of frequencies to points.jsonl (--resume).")
+    drive_options(fractions)
+    frequency_options(fractions, study.DEFAULTS)
+    fractions.add_argument("--starts", type=int, default=None, metavar="N",
+                           help=f"random starts at each frequency (default {study.DEFAULT_STARTS})")
+    fractions.add_argument("--span", type=float, default=None, metavar="M",
+                           help="half-width of the starts' p0, m (p0' within +-SPAN w_n; default the gap d)")
+    many_start_options(fractions, study.DEFAULTS, study.DEFAULT_CONFIRM)
     model_options(fractions)
-    results_folder(fractions, "fractions")
-    engine(fractions)
+    results_options(fractions, "fractions", resumable=True)
+    work_options(fractions)
     fractions.set_defaults(run=command)
 
 
@@ -51,6 +46,8 @@ def command(args) -> int:
     from ...checks import PROG, device, engine_damper, open_model, positive, preflight, whole, worker_count
     from ...periodic.band import frequency_spec
     from ...starts.chunks import backend_for, execute
+    from ...starts.fmu_checks import sentence
+    from ...wording import counted, listed
     from . import study
 
     model = open_model(args)
@@ -58,7 +55,7 @@ def command(args) -> int:
                    "at least one start a frequency is needed")
     confirm_count = whole(study.DEFAULT_CONFIRM if args.confirm is None else args.confirm, "--confirm", 0,
                           "the FMU's checks cannot be negative")
-    seed = whole(0 if args.seed is None else args.seed, "--seed", 0, "the seed is a whole number >= 0")
+    seed = whole(args.seed, "--seed", 0, "the seed is a whole number >= 0")
     jobs = worker_count(args)
     unzipdir, instance = preflight(model, [{}], "--fmu")
     try:
@@ -66,7 +63,6 @@ def command(args) -> int:
         from piezo_fmu.solver.batch import device_error  # the copy of the FMU just loaded, if it carries one
 
         device(args.device, device_error)
-        args.newton_iterations = None
         band = frequency_spec(args, model, instance, study.DEFAULTS)
         parameters = {**model.defaults(), **band.values}
         engine_damper(parameters, batch, band.ratios, band.settings.samples)
@@ -78,27 +74,29 @@ def command(args) -> int:
                                   settings.max_cycles, args.device, confirm_count)
         folder, done, start_over = study.open_fractions(model, spec, args.out, args.resume, args.force)
         backend = backend_for(args, model, unzipdir, instance, jobs)
+        progress = False if args.no_progress else None
         begin = time.perf_counter()
         try:
             if not execute("fractions", study.tasks(spec), folder, done, start_over, study.HEADER_FILE,
                            {**spec.to_dict(), "fmu_guid": model.guid}, backend, starts * len(spec.ratios),
-                           False if args.no_progress else None, args.device):
+                           progress, args.device):
                 return 130
-            marched = time.perf_counter() - begin  # before the FMU's checks
+            marched = time.perf_counter()  # before the FMU's checks
             found, outcome = study.outcome(spec, done)
-            checks = study.checks(spec, found, outcome, backend)
+            checks = study.checks(spec, found, outcome, backend, progress)
+            checked = time.perf_counter()
         finally:
             backend.close()
     finally:
         instance.free()
         discard(unzipdir)
     cycles = sum(record["cycles"] for record in done.values())
-    report = study.write(spec, found, outcome, checks, folder, time.perf_counter() - begin, cycles, marched)
-    print(f"{PROG} fractions: {report['frequencies']} frequencies x {starts} starts, {len(report['attractors'])} "
-          f"attractors: {', '.join(report['attractors'])}")
-    checked = report["fmu_checks"]
-    print(f"  the FMU, marched from {checked['checked']} of the starts: agrees on {checked['agree']}, parted from the "
-          f"batch engine in a chaotic transient on {checked['parted']}, disagrees on {checked['disagree']}")
+    times = {"marching_s": marched - begin, "checking_s": checked - marched}
+    report = study.write(spec, found, outcome, checks, folder, times, cycles, begin)
+    print(f"{PROG} fractions: {counted(report['frequencies'], 'frequency')} x {counted(starts, 'start')} in "
+          f"{report['wall_s']:.1f} s ({report['marching_s']:.1f} s marching, {report['checking_s']:.1f} s checking), "
+          f"{counted(len(report['attractors']), 'attractor')}: {listed(report['attractors'])}")
+    print(f"  {sentence(report['fmu_checks'])}")
     print(f"  results in {folder}")
     return 0
 

@@ -1,4 +1,4 @@
-"""Global stability across a band (issue 26): at each frequency, how likely each motion is.
+"""Global stability across a band: at each frequency, how likely each motion is.
 
 At each of ``--count`` frequencies from ``--ratio-min`` to ``--ratio-max`` times ``sqrt(K/M)``,
 ``--starts`` random starts are marched on the batch engine (``piezo_fmu.solver.batch``) to the
@@ -19,11 +19,12 @@ and the nearest amplitude (:func:`piezo_fmu_harness.starts.attractors.track_name
 keeps one name across the band.
 
 The frequencies are grouped into chunks of the sweep engine, each chunk one batch, appended to
-``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: at every frequency
-the start that reached each attractor soonest, and ``--confirm`` more drawn at random, are marched
-through the FMU, which must reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
+``points.jsonl`` as it finishes (``--resume``). **The FMU checks the answer**: one start of every
+attractor across the band (by its name), the one that reached it soonest, and ``--confirm`` random
+starts more (:mod:`piezo_fmu_harness.starts.fmu_checks`) are marched through the FMU, which must
+reach the same attractor (:mod:`piezo_fmu_harness.starts.destination`).
 
-**A start ends where its trajectory ends** (issue 31). ``--max-cycles`` is a budget, not a
+**A start ends where its trajectory ends**. ``--max-cycles`` is a budget, not a
 verdict: a start not seen reaching an orbit within it is **undecided**, reported with its share,
 never folded into an attractor. At each frequency the survival curve of the starts (the share
 still unresolved after ``t`` periods) is fitted (:mod:`piezo_fmu_harness.starts.transients`):
@@ -34,8 +35,9 @@ chaotic (or quasi-periodic) only where the plateau is shown and their own expone
 Files: ``fractions.nc`` (the fraction of each attractor over frequency, adding to 1 at every
 frequency, with its 95% interval; each attractor's amplitude and impacts per cycle; the undecided
 share, the mean transient lifetime with its interval, the plateau and the survival curve over
-frequency), ``fractions.csv``, ``transients.csv`` (a row a frequency), ``summary.json`` (the budget,
-the shares and what stayed undecided at each frequency, the checks), ``fractions.png`` (the shares
+frequency), ``fractions.csv``, ``transients.csv`` (a row a frequency; each column with its unit),
+``summary.json`` (the budget, the shares and what stayed undecided at each frequency, the checks, the
+times of the marching and of the checks), ``fractions.png`` (the shares
 stacked over frequency, and each attractor's amplitude), ``transients.png`` (the mean lifetime over
 frequency, and the survival curves of a few frequencies).
 
@@ -54,17 +56,20 @@ from pathlib import Path
 import numpy as np
 
 from ...starts.attractors import merge, shares, track_names
-from ...starts.fmu_checks import confirm
+from ...starts.fmu_checks import confirm, tally
 from ...starts.chunks import check_chunk, chunk_size
 from ...store import Damaged, open_folder, require, within
 
 HEADER_FILE = "fractions.json"
+#: The files a fractions study writes besides its header and ``points.jsonl``.
+FILES = ("fractions.nc", "fractions.csv", "transients.csv", "summary.json", "fractions.png", "transients.png")
 #: The band's defaults: 61 frequencies over 0.5 to 2 sqrt(K/M), a budget of 6000 periods a start
 #: (at 1.25 w_n the last of 500 starts reaches its orbit at period 5940).
 DEFAULTS = {"ratios": (0.5, 2.0), "count": 61, "max_cycles": 6000, "fewest": 1}
 DEFAULT_STARTS = 500
-#: FMU checks per frequency besides one per attractor.
-DEFAULT_CONFIRM = 1
+#: FMU checks of random starts besides one of every attractor across the band (docs/harness.md: the
+#: checking then takes no longer than the marching).
+DEFAULT_CONFIRM = 2
 
 
 @dataclass(frozen=True)
@@ -165,30 +170,32 @@ def outcome(spec: FractionSpec, done: dict) -> tuple[list[dict], dict]:
     return merge([done[k] for k in sorted(done)], list(zip(spec.omegas.tolist(), spec.amplitudes)))
 
 
-def checks(spec: FractionSpec, found: list[dict], starts: dict, backend) -> list[dict]:
-    """The FMU's checks, frequency by frequency (:func:`piezo_fmu_harness.starts.fmu_checks.confirm`):
-    every attractor from one of its starts, and ``confirm`` random starts, each with the batch
+def checks(spec: FractionSpec, found: list[dict], starts: dict, backend, progress=None) -> list[dict]:
+    """The FMU's checks (:func:`piezo_fmu_harness.starts.fmu_checks.confirm`): every attractor across
+    the band (by its name) from one of its starts, and ``confirm`` random starts, each with the batch
     engine's sections of its start (its ``track``)."""
     from piezo_fmu.solver.batch import HarmonicHold, damper, tracks
 
     states = spec.states()
-    groups = []
-    for f in range(len(spec.ratios)):
-        here = {i: r for i, r in starts.items() if r["group"] == f}
-        attractors = [{**a, "id": k} for k, a in enumerate(found) if a["group"] == f]
-        drive = HarmonicHold(float(spec.omegas[f]), spec.amplitudes[f], 0.0, spec.samples)
+    names = track_names(found, list(range(len(spec.ratios))), spec.omegas.tolist())
+    attractors = {f: [{**a, "id": k} for k, a in enumerate(found) if a["group"] == f] for f in range(len(spec.ratios))}
 
-        def make(chosen: list[int], f=f, here=here, drive=drive, attractors=attractors) -> list[dict]:
-            periods = [here[i]["periods"] for i in chosen]
-            paths = tracks(damper(spec.values), drive, states[[i % spec.starts for i in chosen]], [0] * len(chosen),
+    def make(chosen: list[int]) -> list[dict]:
+        payloads = []
+        for f in sorted({starts[i]["group"] for i in chosen}):
+            here = [i for i in chosen if starts[i]["group"] == f]
+            periods = [starts[i]["periods"] for i in here]
+            drive = HarmonicHold(float(spec.omegas[f]), spec.amplitudes[f], 0.0, spec.samples)
+            paths = tracks(damper(spec.values), drive, states[[i % spec.starts for i in here]], [0] * len(here),
                            periods, spec.device)
-            return [{"index": i, "values": spec.values, "omega": float(spec.omegas[f]),
-                     "amplitude": spec.amplitudes[f], "samples": spec.samples, "start": states[i % spec.starts].tolist(),
-                     "periods": k, "track": path, "cap": spec.max_cycles, "attractors": attractors,
-                     "study": here[i]["attractor"]}
-                    for i, k, path in zip(chosen, periods, paths)]
-        groups.append((make, here, spec.confirm, spec.seed + f))
-    return confirm(backend, groups)
+            payloads += [{"index": i, "values": spec.values, "omega": float(spec.omegas[f]),
+                          "amplitude": spec.amplitudes[f], "samples": spec.samples,
+                          "start": states[i % spec.starts].tolist(), "periods": k, "track": path,
+                          "cap": spec.max_cycles, "attractors": attractors[f], "study": starts[i]["attractor"]}
+                         for i, k, path in zip(here, periods, paths)]
+        return payloads
+    return confirm(backend, starts, make, spec.confirm, spec.seed, key=lambda record: names[record["attractor"]],
+                   what="fractions", progress=progress)
 
 
 def build_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: list[str]):
@@ -226,9 +233,11 @@ def _shares_dataset(spec: FractionSpec, found: list[dict], starts: dict, names: 
                "engine": "batch engine, checked through the FMU"})
 
 
-def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, wall: float,
-          cycles: int, marching: float) -> dict:
-    from ...datasets import save_dataset
+def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict], folder: Path, times: dict,
+          cycles: int, begin: float) -> dict:
+    """Write the study's files (:data:`FILES`); ``times``: ``marching_s`` and ``checking_s``;
+    ``begin``: when the command's work began (``time.perf_counter``), for ``wall_s``."""
+    from ...datasets import csv_frame, save_dataset, units_of
     from .figure import draw
     from .transients import by_frequency, draw_transients
 
@@ -238,10 +247,10 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
     frame = ds[["fraction", "fraction_low", "fraction_high", "amplitude", "impacts_per_cycle"]].to_dataframe()
     frame = frame.reset_index()
     frame["attractor"] = ds["attractor_name"].values[frame["attractor"].values]
-    frame[frame["fraction"] > 0].to_csv(folder / "fractions.csv", index=False)
+    units = units_of(ds)
+    csv_frame(frame[frame["fraction"] > 0], units).to_csv(folder / "fractions.csv", index=False)
     transients = by_frequency(ds)
-    transients.to_csv(folder / "transients.csv", index=False)
-    verdicts = [c["verdict"] for c in checks]
+    csv_frame(transients, units).to_csv(folder / "transients.csv", index=False)
     per_frequency = [{"ratio": r, "attractors": [{"name": names[row["id"]], "share": row["share"],
                                                   "share_low": row["share_low"], "share_high": row["share_high"],
                                                   "amplitude": row.get("amplitude"), "kind": row["kind"],
@@ -253,17 +262,16 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
                      for f, (r, record) in enumerate(zip(spec.ratios, transients.to_dict("records")))]
     undecided = [{"ratio": row["ratio"], "share": row["undecided"], "starts": row["undecided_starts"]}
                  for row in transients.to_dict("records") if row["undecided_starts"]]
-    report = {"frequencies": len(spec.ratios), "starts_per_frequency": spec.starts, "wall_s": wall,
-              "marching_wall_s": marching, "start_periods": cycles, "budget_periods": spec.max_cycles,
+    draw(ds, folder / "fractions.png")
+    draw_transients(ds, folder / "transients.png")
+    report = {"frequencies": len(spec.ratios), "starts_per_frequency": spec.starts,
+              "wall_s": time.perf_counter() - begin, **times, "start_periods": cycles, "budget_periods": spec.max_cycles,
               "undecided": {"frequencies": len(undecided), "starts": sum(u["starts"] for u in undecided),
                             "where": undecided},
               "attractors": [str(n) for n in ds["attractor_name"].values],
               "by_frequency": per_frequency,
-              "fmu_checks": {"checked": len(checks), "agree": verdicts.count("agrees"),
-                             "parted": verdicts.count("parted"), "disagree": verdicts.count("disagrees"),
+              "fmu_checks": {**tally(checks, times["checking_s"]),
                              "starts": [{**c, "study": names[c["study"]] if c["study"] is not None else None,
                                          "fmu": names[c["fmu"]] if c["fmu"] is not None else None} for c in checks]}}
     (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
-    draw(ds, folder / "fractions.png")
-    draw_transients(ds, folder / "transients.png")
     return report

@@ -1,4 +1,4 @@
-"""The transients of a fractions study (issue 31): at each frequency, how long the starts took to
+"""The transients of a fractions study: at each frequency, how long the starts took to
 reach their orbits, the share the budget left undecided, the mean transient lifetime with its 95%
 interval and the plateau (:func:`piezo_fmu_harness.starts.transients.escape`), and the survival
 curve; ``transients.png`` draws the lifetime over frequency and the survival curves of a few
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...drawing import new_figure, save_png
+from ...drawing import FREQUENCY, RATIO, new_figure, save_png
 from ...starts.attractors import wilson
 from ...starts.transients import escape, survival
 
@@ -117,7 +117,7 @@ def draw_transients(ds, path: Path) -> Path:
         share.set_ylabel("undecided at the budget (%)", color="C3")
         share.set_ylim(0, 100)
     top.set_xlim(ratio.min() - 0.01, ratio.max() + 0.01)
-    top.set_xlabel("w / sqrt(K/M)")
+    top.set_xlabel(FREQUENCY)
     top.set_ylabel("periods")
     top.set_title("How long the starts take to settle", fontsize=9)
     top.legend(fontsize=7, loc="upper left")
@@ -125,7 +125,7 @@ def draw_transients(ds, path: Path) -> Path:
     t = ds["t"].values
     for f in sorted(order):
         curve = ds["survival"].values[f]
-        bottom.semilogy(t, np.where(curve > 0, curve, np.nan), label=f"{ratio[f]:.4g} w_n (lifetime {life[f]:.0f})")
+        bottom.semilogy(t, np.where(curve > 0, curve, np.nan), label=f"{RATIO} = {ratio[f]:.4g} (lifetime {life[f]:.0f})")
     bottom.set_xlabel("forcing periods marched")
     bottom.set_ylabel("share still unresolved")
     if order:

@@ -15,6 +15,7 @@ from ...checks import (
     worker_count,
 )
 from ...spec import DEFAULT_SWEEP_STEP, UsageError
+from ...wording import counted
 
 
 def voltage_models(model, args, allowed: tuple) -> tuple[int, ...]:
@@ -55,9 +56,14 @@ def circuit_overrides(model, args) -> dict:
 
 
 def load_sweep(args) -> int:
+    import signal
+    import time
+
+    from ...checks import interrupt, make_backend
+    from ...engine import InProcess
     from ...fmu import FmuRunError
-    from ...spec import check_times, prepare_output_dir
-    from . import impacts
+    from ...spec import check_times
+    from . import impacts, points
     from . import sweep as load
 
     model = open_model(args)
@@ -74,19 +80,39 @@ def load_sweep(args) -> int:
     impact_step = impacts.IMPACT_STEP if args.impact_step is None else args.impact_step
     check_times(stop_time, impact_step)
     jobs = worker_count(args)
-    out = prepare_output_dir(args.out)
+    loads = load.log_loads(r_min, r_max, count)
+    nominal = float(model.parameters["R_load"].start)
+    todo = points.points(models, loads, nominal, overrides)
+    header = {"models": list(models), "loads_ohm": list(loads), "nominal_load_ohm": nominal, "stop_time": stop_time,
+              "step": step, "overrides": overrides}
+    folder, done, start_over = points.open_loads(model, header, args.out, todo, args.resume, args.force)
     extremes = [{**overrides, "voltage_model": m, "R_load": r} for m in models for r in (r_min, r_max)]
     unzipdir, instance = preflight(model, extremes, "load sweep")
     try:
-        summary = load.run_load_sweep(model, out, unzipdir, instance, models, load.log_loads(r_min, r_max, count),
-                                      stop_time, step, overrides, jobs)
+        remaining = len(todo) - len(done)
+        backend = (InProcess(instance) if min(jobs, remaining) <= 1 and not (args.scheduler or args.dask_local)
+                   else make_backend(args, model, unzipdir, min(jobs, max(1, remaining))))
+        print(f"{PROG} load-sweep: {remaining} of {counted(len(todo), 'point')} to run on {backend.description}", file=sys.stderr)
+        begin = time.perf_counter()
+        previous = signal.signal(signal.SIGTERM, interrupt)
+        try:
+            points.execute(backend, todo, folder, done, start_over, {**header, "fmu_guid": model.guid}, stop_time,
+                           step, False if args.no_progress else None)
+        except KeyboardInterrupt:
+            print(f"\n{PROG} load-sweep: interrupted; {len(done)} of {counted(len(todo), 'point')} are saved in "
+                  f"{folder / 'points.jsonl'}; run the same command with --resume to finish", file=sys.stderr)
+            return 130
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+        summary = load.write_load_sweep(model, folder, instance, done, models, loads, stop_time, step, overrides,
+                                        time.perf_counter() - begin, backend.description)
         print("\n".join(load.summary_lines(summary)))
         if not args.no_impact:
-            loads = {"paper's": float(model.parameters["R_load"].start), "optimum": load.best_load(summary)}
+            loads = {"paper's": nominal, "optimum": load.best_load(summary)}
             loads = {label: r for label, r in loads.items() if r is not None}
             try:
-                result = impacts.run_impacts(model, out, instance, loads, (0, *models), impact_step, overrides,
-                                          stop_time)
+                result = impacts.run_impacts(model, folder, instance, loads, (0, *models), impact_step, overrides,
+                                             stop_time)
             except FmuRunError as error:
                 print(f"{PROG} load-sweep: no single-impact figures: {error}", file=sys.stderr)
             else:
@@ -98,16 +124,15 @@ def load_sweep(args) -> int:
 
 def impact_voltage(args) -> int:
     from ...fmu import FmuRunError
-    from ...spec import prepare_output_dir
+    from ...store import claim_folder
     from . import impacts
     from . import sweep as load
 
     model = open_model(args)
     overrides = circuit_overrides(model, args)
     models = voltage_models(model, args, (0, *load.CIRCUIT_MODELS))
-    given = [load_value(model, value, "--load") for value in args.load]
+    given = [load_value(model, value, "--load") for value in args.load or ()]
     stop_time, step = times(args, impacts.IMPACT_STEP)
-    out = prepare_output_dir(args.out)
     nominal = float(model.parameters["R_load"].start)
     checked = given or [nominal]
     unzipdir, instance = preflight(model, [{**overrides, "voltage_model": m, "R_load": r}
@@ -118,6 +143,7 @@ def impact_voltage(args) -> int:
         else:
             estimate = load.circuit_constants(instance, overrides)["R_opt_estimate_ohm"]
             loads = {"paper's": nominal, "1/(omega_c C_p)": estimate}
+        out = claim_folder(args.out, impacts.FILES, args.force, "run of impact-voltage")
         result = impacts.run_impacts(model, out, instance, loads, models, step, overrides, stop_time)
     except FmuRunError as error:
         raise UsageError(f"impact voltage (--stop-time {stop_time:g} s bounds the search for the first impact): "

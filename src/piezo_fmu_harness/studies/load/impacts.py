@@ -1,4 +1,4 @@
-"""The voltage of a single impact under each voltage model (issue 7), through the FMU with fmpy.
+"""The voltage of a single impact under each voltage model, through the FMU with fmpy.
 
 **Single impact** (``piezo-fmu impact-voltage``, and after a load sweep). The first impact of
 the run, sampled every microsecond (the FMU steps coarsely up to it: its events are exact
@@ -23,6 +23,8 @@ from ...series import write_csv
 from ...spec import DEFAULT_STOP_TIME
 from .sweep import MODEL_NAMES, json_text, ohm_text
 
+#: The files the single impacts write (glob patterns: a figure and a table a load).
+FILES = ("impact_*.png", "impact_*.csv", "impact.json")
 #: Sampling of a single impact (s), and the step that finds it (s).
 IMPACT_STEP = 1e-6
 LOCATE_STEP = 1e-4
@@ -129,10 +131,12 @@ def run_impacts(model: FmuModel, out: Path, instance: Instance, loads: dict, mod
         slug = ohm_text(load).replace(" ", "")
         csv = out / f"impact_{slug}.csv"
         columns = {"time": series[models[0]]["time"]}
+        units = {"time": "s"}
         for m, s in series.items():
             columns[f"voltage_model{m}"] = s[f"voltage_{side}"]
             columns[f"deflection_model{m}"] = s[f"deflection_{side}"]
-        write_csv(csv, columns)
+            units.update({f"voltage_model{m}": "V", f"deflection_model{m}": "m"})
+        write_csv(csv, columns, units)
         figure = curves.impact_figure(series, side, load, "" if label == ohm_text(load) else label,
                                        out / f"impact_{slug}.png")
         result["loads"][label] = {"R_load_ohm": load, "models": entries, "csv": str(csv), "figure": str(figure)}

@@ -1,4 +1,4 @@
-"""The load of the circuit voltage models (issue 7): a load sweep through the FMU with fmpy.
+"""The load of the circuit voltage models: a load sweep through the FMU with fmpy.
 
 **Load sweep** (``piezo-fmu load-sweep``). ``R_load`` log-spaced over at least four decades, for
 ``voltage_model`` 1 (circuit, one-way) and 2 (circuit, coupled); each point is one run of the
@@ -9,7 +9,8 @@ refined by the parabola in ``log10 R`` through the logarithms of the best value 
 neighbours (when the best is not at an end of the range). Beside it: the estimate
 ``R_opt ~ 1 / (omega_c C_p)``, with ``C_p`` (``patch_capacitance``) and ``omega_c``
 (``contact_frequency``) read from the FMU's calculated parameters. Writes ``load_sweep.csv``,
-``load_sweep.json``, ``load_sweep.md`` and ``load_sweep.png``.
+``load_sweep.json``, ``load_sweep.md`` and ``load_sweep.png``; the points run on the engine and are
+recorded as they finish (:mod:`piezo_fmu_harness.studies.load.points`, ``--resume``).
 
 The single impact is in :mod:`piezo_fmu_harness.studies.load.impacts`.
 
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from pathlib import Path
 from typing import Optional
 
@@ -28,15 +28,16 @@ import numpy as np
 
 from ...circuit import circuit_constants
 from ...drawing import ohms
-from ...engine import InProcess, ProcessPool
 from ...fmu import FmuModel, Instance, discard
 from ...series import write_csv
-from ...spec import DEFAULT_STOP_TIME, DEFAULT_SWEEP_STEP
+from ...store import jsonable
+from ...wording import counted
 
 MODEL_NAMES = {0: "quasi-static (open circuit)", 1: "circuit, one-way", 2: "circuit, coupled"}
 #: The models that harvest energy (model 0 is an open-circuit voltage: nothing flows).
 CIRCUIT_MODELS = (1, 2)
-DEFAULT_MODELS = (1, 2)
+#: The files a load sweep writes (besides :data:`piezo_fmu_harness.studies.load.impacts.FILES`).
+FILES = ("load_sweep.csv", "load_sweep.json", "load_sweep.md", "load_sweep.png")
 #: Default loads: 1 kOhm to 1 GOhm, four points a decade. A 2 s point of model 2 costs about
 #: 12 s of CPU at 1 kOhm (its cost grows as 1/R; 25 s for all its loads), model 1 about 0.02 s
 #: whatever the load.
@@ -115,37 +116,20 @@ def end_slopes(loads, values) -> dict:
 
 # -- the load sweep --------------------------------------------------------------------------------
 
-def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance, models=DEFAULT_MODELS,
-                   loads=None, stop_time: float = DEFAULT_STOP_TIME, step: float = DEFAULT_SWEEP_STEP,
-                   overrides: Optional[dict] = None, jobs: int = 1) -> dict:
-    """Run the load sweep of each model in ``models`` and write its files into ``out``.
+def write_load_sweep(model: FmuModel, out: Path, instance: Instance, records: dict, models, loads, stop_time: float,
+                     step: float, overrides: dict, seconds: float, backend: str) -> dict:
+    """Write the load sweep's files into ``out`` from its finished points, ``records`` by index
+    (:func:`piezo_fmu_harness.studies.load.points.points`: each model's loads, then the paper's load).
 
-    ``instance`` (on ``unzipdir``) reads the constants and, with ``jobs == 1``, runs the points;
-    otherwise a :class:`piezo_fmu_harness.engine.ProcessPool` of ``jobs`` workers runs them. Returns the
-    summary written to ``load_sweep.json``.
+    ``instance`` reads the circuit's constants; ``seconds`` and ``backend`` say how long the points
+    took and where. Returns the summary written to ``load_sweep.json``.
     """
     out = Path(out)
-    loads = tuple(loads or log_loads(DEFAULT_R_MIN, DEFAULT_R_MAX, DEFAULT_COUNT))
-    overrides = dict(overrides or {})
+    loads = tuple(loads)
     nominal_load = float(model.parameters["R_load"].start)
     values = {m: {**overrides, "voltage_model": m} for m in models}
     constants = {m: circuit_constants(instance, values[m]) for m in models}
-
-    # Model 2's cost grows as 1/R: its lowest loads go first so the workers finish together.
-    todo = [(m, i, {**values[m], "R_load": r}, stop_time, step)
-            for m in models for i, r in enumerate((*loads, nominal_load))]
-    todo.sort(key=lambda item: (-item[0], item[2]["R_load"]))
-    begin = time.perf_counter()
-    backend = ProcessPool(model, unzipdir, min(jobs, len(todo))) if jobs > 1 else InProcess(instance)
-    records = {}
-    try:
-        for tag, record in backend.run(todo):
-            records[tag, record["index"]] = record
-    except BaseException:
-        backend.close(cancel=True)
-        raise
-    backend.close()
-    seconds = time.perf_counter() - begin
+    records = {(m, i): records[j * (len(loads) + 1) + i] for j, m in enumerate(models) for i in range(len(loads) + 1)}
 
     failed = {f"model {m}, R_load = {record['values']['R_load']:g} Ohm": record["error"]
               for (m, _), record in sorted(records.items()) if record["status"] != "ok"}
@@ -178,7 +162,7 @@ def run_load_sweep(model: FmuModel, out: Path, unzipdir: str, instance: Instance
         "models": per_model,
         "failed_points": failed,
         "wall_seconds": seconds,
-        "backend": backend.description,
+        "backend": backend,
         "fmu": {"path": str(model.path), "guid": model.guid},
         "optimum_method": ("best sampled load; refined: vertex of the parabola in log10 R through ln(value) at "
                            "the best load and its two neighbours"),
@@ -202,16 +186,7 @@ def best_load(summary: dict) -> Optional[float]:
 
 def json_text(value) -> str:
     """``value`` as JSON text, NaN (a metric left undefined) written as null."""
-    def safe(item):
-        if isinstance(item, float) and not math.isfinite(item):
-            return None
-        if isinstance(item, dict):
-            return {key: safe(v) for key, v in item.items()}
-        if isinstance(item, (list, tuple)):
-            return [safe(v) for v in item]
-        return item
-
-    return json.dumps(safe(value), indent=2, allow_nan=False) + "\n"
+    return json.dumps(jsonable(value), indent=2, allow_nan=False) + "\n"
 
 
 def _optimum_cells(optimum: dict, factor: float) -> str:
@@ -230,7 +205,7 @@ def markdown_table(summary: dict, rows: list[dict]) -> str:
         f"Duration simulated: **{summary['duration_s']:g} s** per point from the nominal release, through the FMU "
         f"with fmpy (communication step {summary['communication_step_s']:g} s); loads "
         f"{ohm_text(summary['loads_ohm'][0])} to {ohm_text(summary['loads_ohm'][-1])}, "
-        f"{len(summary['loads_ohm'])} points ({summary['decades']:.3g} decades)."
+        f"{counted(len(summary['loads_ohm']), 'point')} ({summary['decades']:.3g} decades)."
         + (f" Changed parameters: {summary['overrides']}." if summary["overrides"] else ""),
         "",
         "| model | R_opt ~ 1/(omega_c C_p) | best load, energy/impact | energy/impact (uJ) | refined (uJ) "

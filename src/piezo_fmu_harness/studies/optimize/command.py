@@ -19,9 +19,15 @@ from ...checks import (
     worker_count,
 )
 from ...spec import DEFAULT_SWEEP_STEP, UsageError
+from ...wording import counted
 
 
-def search_bounds(model, texts: list[str], fixed: dict, forced: bool) -> tuple[tuple, tuple, tuple]:
+#: Why an objective cannot search the initial state.
+STATE_SET_BY = {"forced": "what the shooting sets under the forced objective",
+                "random": "rest for every realization under the random objective"}
+
+
+def search_bounds(model, texts: list[str], fixed: dict, objective: str) -> tuple[tuple, tuple, tuple]:
     """``--param NAME=LO:HI`` as checked ``(names, lower, upper)``."""
     from ...spec import _checked, _lookup, _number, _split
     from .search import STATE
@@ -34,8 +40,8 @@ def search_bounds(model, texts: list[str], fixed: dict, forced: bool) -> tuple[t
         if parameter.type != "Real":
             raise UsageError(f"{where}: {name} is an Integer parameter; the search is over Real parameters only "
                              "(fix it with --set)")
-        if forced and name in STATE:
-            raise UsageError(f"{where}: the initial state is what the shooting sets under the forced objective")
+        if objective in STATE_SET_BY and name in STATE:
+            raise UsageError(f"{where}: the initial state is {STATE_SET_BY[objective]}; it cannot be searched")
         if name in fixed:
             raise UsageError(f"{where}: {name} is both searched (--param) and fixed (--set); give one")
         if name in names:
@@ -44,6 +50,9 @@ def search_bounds(model, texts: list[str], fixed: dict, forced: bool) -> tuple[t
         if len(parts) != 2:
             raise UsageError(f"{where}: expected NAME=LO:HI, e.g. m=0.02:0.2")
         lo, hi = (_checked(parameter, _number(part, where), where) for part in parts)
+        if objective == "random" and name == "C" and not lo > 0:
+            raise UsageError(f"{where}: without damping the main mass's response to a stationary input never settles; "
+                             "allowed range (0, inf) N.s/m")
         if not lo < hi:
             raise UsageError(f"{where}: {'reversed' if lo > hi else 'empty'} range for {name}: LO = {lo:g} must be "
                              f"below HI = {hi:g}")
@@ -77,12 +86,13 @@ def optimize(args) -> int:
     from ...spec import check_times, check_with_fmu
     from . import report as optimize_report
     from . import search as opt
+    from .log import open_optimization
 
     model = open_model(args)
     forced = args.objective == "forced"
     jobs = worker_count(args)
     fixed = assignments(model, args.set)
-    names, lower, upper = search_bounds(model, args.param, fixed, forced)
+    names, lower, upper = search_bounds(model, args.param, fixed, args.objective)
     weights = {**opt.DEFAULT_WEIGHTS[args.objective],
                **terms_option(args.weight, "--weight", tuple(opt.TERMS[args.objective]), positive=False)}
     if not any(weights.values()):
@@ -99,7 +109,8 @@ def optimize(args) -> int:
     if not 0 < settings["sensitivity_step"] <= 0.5:
         raise UsageError(f"--sensitivity-step {settings['sensitivity_step']:g}: a fraction of each range; allowed "
                          "range (0, 0.5]")
-    settings.update(polish=args.polish, grid=not args.no_grid)
+    settings.update(polish=args.polish, grid=not args.no_grid, seed=whole(args.seed, "--seed", 0,
+                                                                          "the seed is a whole number >= 0"))
     if args.damping == "ls" and "damping_inclination_ls" not in model.outputs:
         raise UsageError(f"--damping ls: the FMU {model.path} lacks the output damping_inclination_ls; rebuild it")
     stop_time, step = times(args, DEFAULT_SWEEP_STEP)
@@ -107,23 +118,33 @@ def optimize(args) -> int:
     unzipdir, instance = preflight(model, [fixed], "--set")
     backend = None
     try:
-        band, values = None, fixed
+        band, values, spectrum = None, fixed, None
         if forced:
             band = frequency_spec(args, model, instance, opt.BAND_DEFAULTS, names)
             values = band.values
+        elif args.objective == "random":
+            values, spectrum = random_spec(args, model, instance, fixed, names, lower, upper)
         parameters = {**model.defaults(), **values}
         problem = opt.Problem(names=names, lower=lower, upper=upper, objective=args.objective, weights=weights,
                               fixed=dict(values), stop_time=stop_time, step=step,
                               damping="DI_ls" if args.damping == "ls" else "DI", band=band,
-                              without_each_time=forced and bool(set(names) & {"M", "K", "C"}))
+                              without_each_time=forced and bool(set(names) & {"M", "K", "C"}), random=spectrum)
         corners = [problem.values(corner) for corner in box_corners(lower, upper)]
         check_with_fmu(model, instance, corners, "the bounds of --param")
-        folder, cache = opt.open_optimization(model, problem, references, args.out, args.resume, args.force, settings)
+        folder, cache = open_optimization(model, problem, references, args.out, args.resume, args.force, settings)
         backend = (InProcess(instance) if jobs == 1 and not (args.scheduler or args.dask_local)
                    else make_backend(args, model, unzipdir, jobs))
         print(f"{PROG} optimize: {args.objective} objective over {', '.join(names)} on {backend.description}"
               + (f" ({len(cache)} evaluations already recorded)" if cache else ""), file=sys.stderr)
-        optimizer = opt.Optimizer(problem, backend, folder, references=dict(references), cache=cache)
+        if spectrum:
+            print(f"{PROG} optimize: each design marched on {counted(spectrum['realizations'], 'realization')} "
+                  f"(seed {spectrum['seed']}, the same for every design) of {spectrum['warmup']:.3g} s of warm-up + "
+                  f"{spectrum['duration']:.3g} s, with and without the damper, on the batch engine", file=sys.stderr)
+        from tqdm import tqdm
+
+        optimizer = opt.Optimizer(problem, backend, folder, references=dict(references), cache=cache,
+                                  bar=tqdm(unit="evaluation", desc="optimize", dynamic_ncols=True, file=sys.stderr,
+                                           disable=True if args.no_progress else None))
         previous = signal.signal(signal.SIGTERM, interrupt)
         try:
             report = opt.run(optimizer, [parameters[name] for name in names], settings["maxiter"],
@@ -136,6 +157,7 @@ def optimize(args) -> int:
         except ValueError as error:
             raise UsageError(str(error)) from None
         finally:
+            optimizer.bar.close()
             signal.signal(signal.SIGTERM, previous)
     finally:
         if backend is not None and not isinstance(backend, InProcess):
@@ -146,6 +168,18 @@ def optimize(args) -> int:
     print("\n".join(optimize_report.report_lines(report, problem, model)))
     print(f"  results in {folder}")
     return 0
+
+
+def random_spec(args, model, instance, fixed: dict, names: tuple, lower: tuple, upper: tuple) -> tuple[dict, dict]:
+    """Under ``--objective random``: the reference design's parameters (from rest, the voltage
+    model and the load) and the excitation's spec (a dict), whose warm-up by default is the longest
+    any design within the bounds needs (the largest ``M``, the smallest ``C``)."""
+    from ...random_response.arguments import damper_values, excitation_spec
+
+    values = damper_values(args, model, instance, fixed)
+    bounds = {name: (lo, hi) for name, lo, hi in zip(names, lower, upper)}
+    slowest = {**values, **{name: bounds[name][side] for name, side in (("M", 1), ("C", 0)) if name in bounds}}
+    return values, excitation_spec(args, values, "optimize", slowest).to_dict()
 
 
 def box_corners(lower: tuple, upper: tuple) -> list[tuple]:

@@ -1,8 +1,9 @@
-"""``piezo-fmu optimize`` (issue 13): a design optimiser over FMU parameters, through the FMU.
+"""``piezo-fmu optimize``: a design optimiser over FMU parameters, through the FMU (or, under a
+spectrum, the batch engine).
 
 ``scipy.optimize.differential_evolution`` searches chosen parameters within bounds. Its
 ``workers`` map is the sweep engine (process pool, Dask or in-process), so a generation's
-evaluations run in parallel; the final polish (L-BFGS-B) goes through the same map. The objective
+evaluations run in parallel; the final polish (Nelder-Mead, ``--polish``) goes through the same map. The objective
 ``J`` is minimised; it is a weighted sum of dimensionless terms, each normalised by a stated
 reference value, the reference design's own (the FMU's start values and ``--set``, the nominal
 damper) unless given:
@@ -21,6 +22,11 @@ damper) unless given:
   at each frequency is the stable one: a stable orbit or, where none is found, the motion that is
   not periodic, measured over its window (its amplitude the envelope's top); an unstable orbit
   never scores.
+- ``random`` (random base acceleration under a PSD, :mod:`.spectrum`; the realizations 0 to N-1
+  of the same seed for every design, with and without the damper, on the batch engine): terms
+  ``ratio``, the paired ratio of the RMS of the main mass's displacement relative to the base with
+  the damper over without it (to be small), and ``power``, the mean power harvested in both loads
+  over the reference design's (to be large; weight 0 unless given). ``J = w_r ratio - w_p power``.
 
 A weight may be negative (it turns what its term rewards around) or zero (the term is not
 computed when that saves work).
@@ -34,12 +40,12 @@ Every evaluation is appended to ``evaluations.jsonl`` as it finishes. ``--resume
 as a cache: the same seed makes the optimiser propose the same points again, each found in the
 cache, so an interrupted run goes on where it stopped and loses nothing.
 
-The harness reads nothing but the FMU: it never imports the simulation core.
+The harness reads nothing but the FMU for the perfectibility and the forced response; under
+``random`` it marches on the simulation core's batch engine (:mod:`.spectrum`).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -51,34 +57,41 @@ import numpy as np
 from ...fmu import FmuRunError, Instance
 from ...periodic.band import FrequencySpec
 from .band import sweep_band
-from ...store import PointStore, open_folder
-from .log import EVALUATIONS_FILE, record_check
+from ...store import PointStore
+from .log import EVALUATIONS_FILE
 
-HEADER_FILE = "optimize.json"
+#: The files an optimisation writes besides its header and ``evaluations.jsonl``.
+FILES = ("report.md", "report.json", "evaluations.csv", "convergence.png")
 #: Each objective's terms: +1 for a term to be large (it enters J with a minus sign), -1 small.
 TERMS = {
     "perfectibility": {"DI": 1, "V_rms": 1},
     "forced": {"amplitude": -1, "transmissibility": -1, "power": 1, "worst": -1},
+    "random": {"ratio": -1, "power": 1},
 }
 DEFAULT_WEIGHTS = {
     "perfectibility": {"DI": 0.5, "V_rms": 0.5},
     # Lightly on power: the regimes that harvest most chatter with large amplitude (with 0.5, the
     # optimum of (m, d) was such a regime, its peak 119 mm against 16 mm for the best amplitude).
     "forced": {"amplitude": 1.0, "transmissibility": 0.0, "power": 0.1, "worst": 0.0},
+    # The ratio alone: J is what a user of the random study reads, and the power, which follows
+    # the impacts, is reported (a weight trades it against the ratio).
+    "random": {"ratio": 1.0, "power": 0.0},
 }
 #: The perfectibility's terms are in % (eq. 31).
-SCALE = {"perfectibility": 100.0, "forced": 1.0}
+SCALE = {"perfectibility": 100.0, "forced": 1.0, "random": 1.0}
 #: The reference values a user may state (SI), by objective.
-REFERENCES = {"perfectibility": ("DI", "V_rms"), "forced": ("power", "amplitude_without")}
+REFERENCES = {"perfectibility": ("DI", "V_rms"), "forced": ("power", "amplitude_without"), "random": ("power",)}
 #: The search's defaults, by objective: a forced evaluation sweeps a band, a free decay is one run.
 SEARCH_DEFAULTS = {
-    "perfectibility": {"maxiter": 30, "popsize": 15, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
-    "forced": {"maxiter": 8, "popsize": 6, "tol": 0.01, "seed": 1, "sensitivity_step": 0.02},
+    "perfectibility": {"maxiter": 30, "popsize": 15, "tol": 0.01, "sensitivity_step": 0.02},
+    "forced": {"maxiter": 8, "popsize": 6, "tol": 0.01, "sensitivity_step": 0.02},
+    "random": {"maxiter": 8, "popsize": 6, "tol": 0.01, "sensitivity_step": 0.02},
 }
 #: The forced objective's band: w / sqrt(K/M) from 0.8 to 1.2 at 9 frequencies, at most 150 cycles
 #: each (every evaluation sweeps it); a single frequency is allowed.
 BAND_DEFAULTS = {"ratios": (0.8, 1.2), "count": 9, "max_cycles": 150, "fewest": 1}
-#: Parameters the forced objective cannot search: the shooting sets the initial state.
+#: Parameters the forced and random objectives cannot search: the initial state (the shooting sets
+#: it; every realization starts from rest).
 STATE = ("p0", "q0", "dp0", "dq0")
 
 
@@ -91,11 +104,12 @@ class Problem:
     names, lower, upper : tuple
         The searched parameters and their bounds.
     objective : str
-        ``perfectibility`` or ``forced``.
+        ``perfectibility``, ``forced`` or ``random``.
     weights : dict
         Weight of each term of the objective.
     fixed : dict
-        FMU parameters held fixed (``--set``, and under ``forced`` the voltage model and load).
+        FMU parameters held fixed (``--set``, and under ``forced`` and ``random`` the voltage model
+        and load; under ``random`` every parameter, from rest).
     stop_time, step : float
         Duration and communication step of a free-decay run (``perfectibility``), s.
     damping : str
@@ -105,6 +119,10 @@ class Problem:
     without_each_time : bool
         Under ``forced``: the peak without the damper changes with the searched parameters
         (``M``, ``K`` or ``C`` among them), so each evaluation computes it.
+    random : dict or None
+        Under ``random``: the excitation, realizations and window
+        (:class:`~piezo_fmu_harness.random_response.spec.RandomSpec`, as a dict), whose ``values``
+        each design's replace.
     """
 
     names: tuple
@@ -118,6 +136,7 @@ class Problem:
     damping: str = "DI"
     band: Optional[FrequencySpec] = None
     without_each_time: bool = False
+    random: Optional[dict] = None
 
     def values(self, x) -> dict:
         return {**self.fixed, **{name: float(v) for name, v in zip(self.names, x)}}
@@ -134,7 +153,8 @@ def evaluate(instance: Instance, problem: Problem, x, without: bool = False) -> 
     """The raw measures of the design ``x`` (a task of the sweep engine): under
     ``perfectibility`` the free-decay metrics; under ``forced`` the peak amplitude and
     transmissibility over the band, the mean harvested power and how many frequencies did not
-    settle, with the peak without the damper when ``without`` (or the problem says so)."""
+    settle, with the peak without the damper when ``without`` (or the problem says so); under
+    ``random`` the RMS ratio and the power over the realizations (:func:`.spectrum.march_design`)."""
     begin = time.perf_counter()
     values = problem.values(x)
     record = {"x": [float(v) for v in x], "status": "ok", "error": None}
@@ -142,6 +162,10 @@ def evaluate(instance: Instance, problem: Problem, x, without: bool = False) -> 
         if problem.objective == "perfectibility":
             metrics = instance.run(values, problem.stop_time, problem.step)
             record["measures"] = {key: metrics.get(key) for key in ("DI", "DI_ls", "V_rms", "impact_count")}
+        elif problem.objective == "random":
+            from .spectrum import march_design
+
+            record["measures"] = march_design(problem.random, values)
         else:
             record["measures"] = sweep_band(instance, problem.band, values, with_damper=True)
             if problem.weights.get("worst"):  # the sweep down too: the worse of the two stable responses
@@ -161,10 +185,13 @@ def terms(problem: Problem, measures: dict, references: dict) -> dict:
     """The dimensionless terms of a design from its raw measures."""
     if problem.objective == "perfectibility":
         return {"DI": measures[problem.damping] / references["DI"], "V_rms": measures["V_rms"] / references["V_rms"]}
+    power = measures["power"] / references["power"] if references.get("power") else math.nan
+    if problem.objective == "random":
+        return {"ratio": measures["ratio"], "power": power}
     without = measures.get("amplitude_without", references.get("amplitude_without"))
     return {"amplitude": measures["amplitude"] / without if without else math.nan,
             "transmissibility": measures["transmissibility"],
-            "power": measures["power"] / references["power"] if references.get("power") else math.nan,
+            "power": power,
             "worst": (max(measures["amplitude"], measures["amplitude_down"]) / without
                       if without and measures.get("amplitude_down") is not None else math.nan)}
 
@@ -191,6 +218,8 @@ class Optimizer:
     references: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict)
     phase: str = "search"
+    #: counts the evaluations as they finish (a tqdm bar), or None
+    bar: object = None
 
     def __post_init__(self) -> None:
         # the next evaluation's index: after those recorded (a line deleted from the log leaves a gap)
@@ -215,6 +244,8 @@ class Optimizer:
                     self._score(record)
                     self.cache[self._key(record["x"])] = record
                     store.append(record)
+                    if self.bar is not None:
+                        self.bar.update(1)
         return [self.cache[self._key(x)] for x in xs]
 
     def _score(self, record: dict) -> None:
@@ -245,6 +276,8 @@ class Optimizer:
         measures = record["measures"]
         if self.problem.objective == "perfectibility":
             found = {"DI": measures[self.problem.damping], "V_rms": measures["V_rms"]}
+        elif self.problem.objective == "random":
+            found = {"power": measures["power"]}
         else:
             found = {"power": measures["power"], "amplitude_without": measures["amplitude_without"]}
         self.references = {**found, **self.references}
@@ -259,6 +292,8 @@ class Optimizer:
 
     def search(self, maxiter: int, popsize: int, seed: int, polish: bool, tol: float):
         from scipy.optimize import differential_evolution
+
+        from .polish import polish_simplex
 
         self.phase = "search"
         bounds = list(zip(self.problem.lower, self.problem.upper))
@@ -298,27 +333,6 @@ class Optimizer:
         return rows
 
 
-def polish_simplex(func, x0, bounds, constraints=()):
-    """The polish of the search's best design: Nelder-Mead within the bounds, in coordinates
-    scaled to the unit box (the parameters' scales differ by orders of magnitude), from a simplex
-    of 2% of each range. Derivative-free: the objective is only as smooth as its steady states
-    or free decays, and finite differences of a value exact to 1e-12 make gradients of noise.
-    Stops when the simplex spans 1e-7 of each range and 1e-11 in J."""
-    from scipy.optimize import minimize
-
-    lower, upper = np.asarray(bounds.lb, float), np.asarray(bounds.ub, float)
-    span = upper - lower
-    start = (np.asarray(x0, float) - lower) / span
-    simplex = [start] + [np.clip(start + 0.02 * np.eye(len(start))[i] * (1 if start[i] < 0.98 else -1), 0, 1)
-                         for i in range(len(start))]
-    result = minimize(lambda u: func(lower + np.clip(u, 0.0, 1.0) * span), start, method="Nelder-Mead",
-                      bounds=[(0.0, 1.0)] * len(start),
-                      options={"initial_simplex": np.array(simplex), "xatol": 1e-7, "fatol": 1e-11,
-                               "maxfev": 100 * len(start)})
-    result.x = lower + np.clip(result.x, 0.0, 1.0) * span
-    return result
-
-
 def value(record: dict) -> float:
     """A record's J; +inf for a design the FMU rejected or whose J is undefined (null in the log)."""
     return math.inf if record["objective"] is None else record["objective"]
@@ -327,25 +341,6 @@ def value(record: dict) -> float:
 def _evaluate_task(instance: Instance, item: tuple) -> dict:
     problem, x, without = item
     return evaluate(instance, problem, x, without)
-
-
-def open_optimization(model, problem: Problem, references: dict, folder: Path, resume: bool, force: bool,
-                      settings: dict) -> tuple[Path, dict]:
-    """Check the folder, then commit it to this optimisation (its header written, old evaluations
-    dropped unless resuming); return ``(folder, cache of the evaluations recorded)``."""
-    header = {"problem": problem.to_dict(), "references_given": references, "search": settings,
-              "fmu": str(model.path), "fmu_guid": model.guid}
-    folder, done, start_over = open_folder(folder, HEADER_FILE, header, ("problem", "references_given", "search"),
-                                           resume, force, "--out", "optimisation", EVALUATIONS_FILE,
-                                           record_check(problem))
-    if start_over:
-        PointStore(folder, EVALUATIONS_FILE).clear()
-    (folder / HEADER_FILE).write_text(json.dumps(header, indent=2) + "\n")
-    cache = {}
-    for record in done.values():
-        key = ("reference" if record.get("phase") == "reference" else "design",) + tuple(repr(v) for v in record["x"])
-        cache[key] = record
-    return folder, cache
 
 
 def run(optimizer: Optimizer, x_reference, maxiter: int, popsize: int, seed: int, polish: bool, tol: float,
@@ -371,6 +366,9 @@ def run(optimizer: Optimizer, x_reference, maxiter: int, popsize: int, seed: int
                    "generations": int(result.nit), "message": str(result.message), "wall_s": search_s,
                    "maxiter": maxiter, "popsize": popsize, "seed": seed, "polish": polish, "tol": tol},
     }
+    if problem.random:  # the excitation and the realizations every design was marched on
+        report["excitation"] = {key: problem.random[key] for key in ("source", "levels", "realizations", "seed",
+                                                                      "warmup", "duration", "step", "f_low")}
     if grid:
         per_axis, records = optimizer.grid(evaluations)
         finite = [r for r in records if r["objective"] is not None]

@@ -32,14 +32,16 @@ A --config file (SI units; the command line's --grid, --set, --stop-time and --s
 def register(commands) -> None:
     """``piezo-fmu sweep``."""
     from ...spec import DEFAULT_SWEEP_STEP
-    from ...options import common, engine
+    from ...options import common, damping_option, results_options, work_options
     from . import presets
     from .command import sweep as run
 
     sweep = commands.add_parser(
         "sweep", help="a sweep over FMU parameters (Figs. 4-9)",
-        description="Run every point of a full-factorial grid through the FMU; write NetCDF, a tidy "
-                    "CSV, the zones and contour figures. Presets:\n" + presets.describe() + TOML_HELP,
+        description="Run every point of a full-factorial grid through the FMU; write sweep.nc, sweep.csv, zones.json "
+                    "and the contour figures (DI.png, V_rms.png, P_ave.png, perfectibility.png; a preset set: "
+                    "fig4.png to fig9.png); what was asked goes to sweep.json and each point to points.jsonl "
+                    "(--resume). Presets:\n" + presets.describe() + TOML_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     common(sweep, DEFAULT_SWEEP_STEP, "the metrics do not depend on it")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
@@ -48,20 +50,19 @@ def register(commands) -> None:
                        help=f"a built-in sweep: {', '.join(presets.preset_names())}")
     sweep.add_argument("--config", type=Path, metavar="FILE.toml",
                        help="grids and values from a TOML file ([grid], [set], stop_time, step, out)")
-    sweep.add_argument("--out", type=Path, default=None, metavar="DIR",
-                       help="results folder (default results/PRESET for a preset, else results/sweep)")
-    engine(sweep)
+    results_options(sweep, "sweep", resumable=True, default="; results/PRESET with --preset")
+    work_options(sweep)
     sweep.add_argument("--zone-quantile", type=float, default=None, metavar="Q",
                        help="our zones are the points at or above this quantile of each metric (default 0.9)")
-    sweep.add_argument("--damping", choices=("eq29", "ls"), default="eq29",
-                       help="the damping measure that ranks the vibratory-based and design zones: eq29, the "
-                            "paper's DI (default), or ls, DI_ls, the least-squares decay slope of the maxima")
+    damping_option(sweep)
     sweep.set_defaults(run=run)
 
 
 def register_presets(commands) -> None:
     """``piezo-fmu presets``: the built-in sweeps."""
-    commands.add_parser("presets", help="list the built-in sweeps").set_defaults(run=_presets)
+    commands.add_parser("presets", help="list the built-in sweeps (writes nothing)",
+                        description="List the built-in sweeps of `piezo-fmu sweep --preset NAME`.").set_defaults(
+        run=_presets)
 
 
 def _presets(args) -> int:

@@ -23,6 +23,7 @@ import numpy as np
 
 from ...fmu import METRIC_OUTPUTS, METRIC_UNITS, OPTIONAL_METRICS, FmuModel
 from ...spec import SweepSpec
+from ...wording import counted
 
 #: The paper's design zones (SI): m 0.17-0.20 kg, d 8-10 mm, x1 0-25 mm (Fig. 9).
 PAPER_ZONES = {"m": (0.17, 0.20), "d": (0.008, 0.010), "x1": (0.0, 0.025)}
@@ -254,13 +255,14 @@ def zone_summary_lines(report: dict, show) -> list[str]:
         region = ", ".join(show(name, lo, hi) for name, (lo, hi) in zone["region"].items())
         best = ", ".join(show(name, value) for name, value in zone["best"].items())
         lines.append(f"  {zone['kind']} zone (top {100 * (1 - zone['quantile']):.0f}% of {metric}: "
-                     f"{zone['points']} points, {zone['connected_parts']} connected parts): around the best "
+                     f"{counted(zone['points'], 'point')}, {counted(zone['connected_parts'], 'connected part')}): "
+                     "around the best "
                      f"point {region}; best {best}")
     paper = report.get("paper")
     if paper:
         ranges = ", ".join(show(name, lo, hi) for name, (lo, hi) in paper["ranges"].items())
         share = paper["share_of_paper_zone_in_our_design_zone"]
-        lines.append(f"  paper's design zone {ranges}: {paper['points']} points, mean perfectibility "
+        lines.append(f"  paper's design zone {ranges}: {counted(paper['points'], 'point')}, mean perfectibility "
                      f"{_fmt(paper['mean_perfectibility_inside'])} % there vs {_fmt(paper['mean_perfectibility_sweep'])} % "
                      f"over the sweep; {_fmt(None if share is None else 100 * share)} % of it lies in our design zone")
     return lines

@@ -19,6 +19,7 @@ from ...checks import (
     worker_count,
 )
 from ...spec import DEFAULT_SWEEP_STEP, UsageError
+from ...wording import counted
 from . import presets
 
 
@@ -93,14 +94,14 @@ def sweep(args) -> int:
             run.begin()
         if remaining:
             total = sum(run.spec.size for run in runs)
-            print(f"{PROG} sweep: {remaining} of {total} points to run on {backend.description} "
+            print(f"{PROG} sweep: {remaining} of {counted(total, 'point')} to run on {backend.description} "
                   f"({runs[0].spec.stop_time:g} s each, communication step {runs[0].spec.step:g} s)",
                   file=sys.stderr)
             try:
                 execute(runs, backend, progress=False if args.no_progress else None)
             except KeyboardInterrupt:
                 finished = sum(len(run.done) for run in runs)
-                print(f"\n{PROG} sweep: interrupted; {finished} of {total} points are saved in "
+                print(f"\n{PROG} sweep: interrupted; {finished} of {counted(total, 'point')} are saved in "
                       f"{', '.join(str(run.store.path) for run in runs)}; run the same command with "
                       "--resume to finish", file=sys.stderr)
                 return 130
@@ -114,7 +115,7 @@ def sweep(args) -> int:
         print("\n".join(analysis.zone_summary_lines(results[name]["zones"], display(results[name]["dataset"]))))
         failed = int((results[name]["dataset"]["status"] == "error").sum())
         if failed:
-            print(f"  {failed} points were rejected by the FMU (status 'error' in {run.folder / 'sweep.csv'})")
+            print(f"  {counted(failed, 'point')} rejected by the FMU (status 'error' in {run.folder / 'sweep.csv'})")
         print(f"  results in {run.folder}")
     if panels:
         print(f"Figs. 4-9 in {out}")

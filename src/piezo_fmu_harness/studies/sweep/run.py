@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from ...datasets import save_dataset
+from ...datasets import csv_frame, save_dataset, units_of
 from ...drawing import Rendering
 from ...fmu import METRIC_OUTPUTS, OPTIONAL_METRICS, FmuModel
 from ...spec import SweepSpec
@@ -161,7 +161,7 @@ def finish(model: FmuModel, run: SweepRun, quantile: float = analysis.DEFAULT_ZO
 
     def write() -> None:
         save_dataset(ds, files[0])
-        analysis.tidy_frame(ds, quantile).to_csv(files[1], index=False)
+        csv_frame(analysis.tidy_frame(ds, quantile), units_of(ds)).to_csv(files[1], index=False)
         files[2].write_text(json.dumps(zones, indent=2) + "\n")
 
     paper_zone = {name: analysis.PAPER_ZONES[name] for name in ds["DI"].dims if name in analysis.PAPER_ZONES}

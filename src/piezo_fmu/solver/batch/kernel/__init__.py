@@ -23,8 +23,9 @@ import threading
 
 import numpy as np
 
+from .layout import LEDGER, STATS
 from .registry import Target
-from .tables import Tables
+from .tables import Tables, input_hold
 
 #: The devices the kernel runs on: the CPU (numba) and an NVIDIA GPU (numba's CUDA target).
 DEVICES = ("cpu", "gpu")
@@ -105,6 +106,27 @@ def separate(device: str, tables: Tables, state: np.ndarray, failed: np.ndarray,
     _launch(device, _entries(device).separate, args + tables.arguments() + outputs, n, (0, 1, 3), 5)
     logs, samples, impacts, top, bottom = outputs
     return {"logs": logs, "samples": samples, "impacts": impacts, "top": top, "bottom": bottom}
+
+
+def march_input(device: str, tables: Tables, hold: np.ndarray, state: np.ndarray, failed: np.ndarray,
+                accumulators: tuple, nodes: np.ndarray, slopes: np.ndarray) -> tuple:
+    """March every trajectory of ``state`` ((7, n), as :func:`march` takes it; updated in place, as is
+    ``failed``) through a block of its own base input: ``nodes`` ((n, B + 1), m) and ``slopes``
+    ((n, B), m/s), a trajectory's a row, and the hold step's constants ``hold``
+    (:func:`.tables.input_hold`); ``accumulators`` ``(stats (n, STATS), counts (n,) int64, ledger (n,
+    LEDGER))`` are added to (:mod:`.inputs`). Returns host arrays (n, B): ``positions``, ``p`` (m)
+    at each step's end, and ``onsets``, the contact onsets in each step."""
+    n = state.shape[1]
+    positions, onsets = np.empty(slopes.shape), np.empty(slopes.shape, np.int32)
+    args = (state, failed, *accumulators, np.ascontiguousarray(nodes, float), np.ascontiguousarray(slopes, float),
+            np.ascontiguousarray(hold, float), tables.constants, positions, onsets)
+    _launch(device, _entries(device).march_input, args, n, (0, 1, 2, 3, 4), 2)
+    return positions, onsets
+
+
+def accumulators(n: int) -> tuple:
+    """Zeroed accumulators of :func:`march_input` for ``n`` trajectories."""
+    return np.zeros((n, STATS)), np.zeros(n, np.int64), np.zeros((n, LEDGER))
 
 
 def _entries(device: str):

@@ -18,8 +18,10 @@ compiled for its process alone.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import threading
 from pathlib import Path
 
 #: The batch engine's package folder, whose files' content names the cache's folder.
@@ -95,3 +97,51 @@ def install(folder: Path) -> None:
             return super().from_function(py_func, py_file)
 
     impl._locator_classes = [KernelLocator] + list(impl._locator_classes)
+
+
+@contextlib.contextmanager
+def folder_lock(folder: Path):
+    """Hold an exclusive lock on ``folder`` (a file ``.lock`` in it) against other processes, waiting
+    for it."""
+    with open(Path(folder) / ".lock", "a+b") as handle:
+        if os.name == "nt":
+            import msvcrt
+
+            handle.seek(0)
+            while True:
+                try:
+                    msvcrt.locking(handle.fileno(), msvcrt.LK_LOCK, 1)
+                    break
+                except OSError:  # LK_LOCK gives up after ten seconds: wait on
+                    continue
+            try:
+                yield
+            finally:
+                handle.seek(0)
+                msvcrt.locking(handle.fileno(), msvcrt.LK_UNLCK, 1)
+        else:
+            import fcntl
+
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
+class first_call_locked:
+    """``dispatcher`` (a compiled entry point), whose first call in this process holds
+    :func:`folder_lock` on ``folder``: the call that compiles it, or loads it from the cache."""
+
+    def __init__(self, dispatcher, folder: Path):
+        self.dispatcher, self._folder = dispatcher, folder
+        self._lock = threading.Lock()
+        self._warm = False
+
+    def __call__(self, *args):
+        if not self._warm:
+            with self._lock, folder_lock(self._folder):
+                result = self.dispatcher(*args)
+                self._warm = True
+            return result
+        return self.dispatcher(*args)

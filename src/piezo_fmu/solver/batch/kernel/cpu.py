@@ -1,15 +1,23 @@
 """The kernel on the CPU: numba's ``njit``, every core, the compiled code kept on disk
-(:mod:`.cache`). Imported only when a march needs it (it imports numba)."""
+(:mod:`.cache`). Imported only when a march needs it (it imports numba).
+
+The ``prange`` loops run on numba's own thread pool (the ``workqueue`` layer) first, then OpenMP,
+then TBB, unless ``NUMBA_THREADING_LAYER`` or ``NUMBA_THREADING_LAYER_PRIORITY`` say otherwise:
+with TBB (Debian's libtbb 2021.8, numba 0.68) a process that marched many small batches hung at
+its exit in ``tbb::finalize``, and a trajectory's bits do not depend on the layer.
+"""
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
-from numba import njit, prange
+from numba import config, njit, prange
 
-from .cache import cache_dir, install, unwritable, version_folder
+from .cache import cache_dir, first_call_locked, install, unwritable, version_folder
 from .flat import march_one_flat
+from .inputs import march_input_one
 from .layout import WORK
 from .periods import march_one, separate_one
 from .registry import Target, entry
@@ -40,9 +48,19 @@ def separate(state, failed, groups, offset, scale, delta, drive, c, logs, sample
                      work)
 
 
+@entry(parallel=True)
+def march_input(state, failed, stats, counts, ledger, nodes, slopes, hold, c, positions, onsets):
+    """Every trajectory of ``state`` through a block of its own base input (:func:`.inputs.march_input_one`)."""
+    for i in prange(state.shape[1]):
+        work = np.empty(WORK)
+        march_input_one(i, state, failed, nodes, slopes, hold, c, positions, onsets, stats, counts, ledger, work)
+
+
 def build() -> Target:
-    """The CPU's target, its compiled code kept in :func:`.cache.cache_dir` (or, where that cannot
+    """The CPU's target (the thread pool chosen as the module's text says), its compiled code kept in :func:`.cache.cache_dir` (or, where that cannot
     be written, compiled for this process alone, with a warning that says so)."""
+    if not {"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(os.environ):
+        config.THREADING_LAYER_PRIORITY = ["workqueue", "omp", "tbb"]
     folder = version_folder(cache_dir())
     problem = unwritable(folder)
     if problem is None:
@@ -55,6 +73,12 @@ def build() -> Target:
     # The inner functions touch no reference-counted object: without numba's runtime (``_nrt``)
     # their array arguments are not counted at every call, which cost more than the physics.
     inner = dict(cache=cache, error_model="numpy", _nrt=False, no_cpython_wrapper=True)
-    return Target(source=njit(**inner), inline=njit(inline="always", **inner),
-                  parallel=njit(cache=cache, parallel=True, error_model="numpy"),
-                  serial=njit(cache=cache, error_model="numpy"))
+
+    def entry(**options):
+        """The compiler of entry points: kept in the cache, their first call locked against other
+        processes compiling into it (:class:`.cache.first_call_locked`)."""
+        jit = njit(cache=cache, error_model="numpy", **options)
+        return (lambda function: first_call_locked(jit(function), folder)) if cache else jit
+
+    return Target(source=njit(**inner), inline=njit(inline="always", **inner), parallel=entry(parallel=True),
+                  serial=entry())

@@ -7,6 +7,7 @@ from __future__ import annotations
 from numba import config, cuda, float64
 
 from .flat import march_one_flat
+from .inputs import march_input_one
 from .layout import WORK
 from .periods import march_one, separate_one
 from .registry import Target, entry
@@ -44,6 +45,15 @@ def separate(state, failed, groups, offset, scale, delta, drive, c, logs, sample
         work = cuda.local.array(WORK, float64)
         separate_one(i, state, failed, groups, offset, scale, delta, drive, c, logs, samples, impacts, tops, bottoms,
                      work)
+
+
+@entry(gpu=True)
+def march_input(state, failed, stats, counts, ledger, nodes, slopes, hold, c, positions, onsets):
+    """Every trajectory of ``state`` through a block of its own base input (:func:`.inputs.march_input_one`)."""
+    i = cuda.grid(1)
+    if i < state.shape[1]:
+        work = cuda.local.array(WORK, float64)
+        march_input_one(i, state, failed, nodes, slopes, hold, c, positions, onsets, stats, counts, ledger, work)
 
 
 def build(registers: int | None = REGISTERS) -> Target:

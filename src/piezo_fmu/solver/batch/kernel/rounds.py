@@ -45,17 +45,15 @@ def contact_voltage(side, vl, vr, c):
 
 
 @source(inline=True)
-def round_end(start, x, event, v, h, progress, c, work):
-    """A round's end, from its ``start`` (:func:`round_start`), the motion ``x`` it started from and
-    its search's ``event`` ``(time, to, failed)`` (:func:`.location.next_event`): the trajectory moved
-    to the switch or the step's end, the switch rules applied. ``progress`` is the step's
-    ``(tl, instant, onsets)``: the time into it (s), the switches at the present instant and the
-    contact onsets so far. Returns ``(x, progress, status)``, ``status`` :data:`GOING` (another
-    round), :data:`DONE` (the step's end) or :data:`FAILED` (the state NaN)."""
+def segment(start, x, event, v, c, work):
+    """A round's segment: the motion ``x`` moved from the round's ``start`` (:func:`round_start`) to
+    its search's ``event`` ``(time, to, failed)`` (:func:`.location.next_event`) or the step's end,
+    in closed form, before any switch: ``(moved, dt, switch)``, ``moved`` the motion there (the
+    voltages faded, the one in contact the contact's), ``dt`` (s) the segment's length and
+    ``switch`` whether the phase switches there."""
     u, du, w, dw, rem, base = start
     side, vl, vr = x[4], x[5], x[6]
-    t_ev, to, bad = event
-    tl, instant, onsets = progress
+    t_ev, bad = event[0], event[2]
     hg = c[HG]
     coupled = c[COUPLED] != 0.0
     free = side == 0.0
@@ -85,21 +83,43 @@ def round_end(start, x, event, v, h, progress, c, work):
                 vl = in_contact
             else:
                 vr = in_contact
-    if switch and free:
-        dq = capture(c[MI], c[M_EQ], dp, dq)
-        side = to
+    return (p, dp, q, dq, side, vl, vr), dt, switch
+
+
+@source(inline=True)
+def switched(moved, dt, switch, event, h, progress, c):
+    """A round's end after its :func:`segment`: the switch rules applied to ``moved`` (at an onset to
+    the side ``event[1]``), the step's ``progress`` ``(tl, instant, onsets)`` brought on (the time
+    into it (s), the switches at the present instant, the contact onsets so far). Returns ``(x,
+    progress, status)``, ``status`` :data:`GOING` (another round), :data:`DONE` (the step's end) or
+    :data:`FAILED` (the state NaN)."""
+    p, dp, q, dq, side, vl, vr = moved
+    tl, instant, onsets = progress
+    if switch and side == 0.0:
+        dq = capture(c[MI], c[M_EQ], dp, dq)[0]
+        side = event[1]
         onsets += 1
     elif switch:
-        dp = release(c[MM], c[M1], c[M_EQ], dp, dq)
+        dp = release(c[MM], c[M1], c[M_EQ], dp, dq)[0]
         side = 0.0
     instant = instant + 1 if switch and dt == 0.0 else 0
-    bad = bad or instant > MAX_SWITCHES_AT_ONE_INSTANT or not math.isfinite(p + q + dp + dq)
+    bad = event[2] or instant > MAX_SWITCHES_AT_ONE_INSTANT or not math.isfinite(p + q + dp + dq)
     if bad:
         return (NAN, NAN, NAN, NAN, 0.0, vl, vr), (tl, instant, onsets), FAILED
     tl = tl + dt if switch else h + 0.0 * tl
     if not switch or tl >= h:
         return (p, dp, q, dq, side, vl, vr), (tl, instant, onsets), DONE
     return (p, dp, q, dq, side, vl, vr), (tl, instant, onsets), GOING
+
+
+@source(inline=True)
+def round_end(start, x, event, v, h, progress, c, work):
+    """A round's end, from its ``start`` (:func:`round_start`), the motion ``x`` it started from and
+    its search's ``event`` ``(time, to, failed)`` (:func:`.location.next_event`): the trajectory moved
+    to the switch or the step's end (:func:`segment`), the switch rules applied (:func:`switched`).
+    Returns ``(x, progress, status)``."""
+    moved, dt, switch = segment(start, x, event, v, c, work)
+    return switched(moved, dt, switch, event, h, progress, c)
 
 
 @source

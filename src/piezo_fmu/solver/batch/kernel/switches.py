@@ -9,17 +9,18 @@ from .registry import source
 
 @source(inline=True)
 def capture(m, M_eq, dp, dq):
-    """``q'`` just after a contact onset (m/s): the impact mass ``m`` (kg) at ``q'`` captures the tip
-    mass ``M_eq`` (kg), which moved with the main mass at ``p'`` (:func:`piezo_fmu.model.dynamics.capture`)."""
-    return (m * dq + M_eq * dp) / (m + M_eq)
+    """A contact onset: the impact mass ``m`` (kg) at ``q'`` (m/s) captures the tip mass ``M_eq`` (kg),
+    which moved with the main mass at ``p'``. Returns ``q'`` just after (m/s) and the energy lost (J)
+    (:func:`piezo_fmu.model.dynamics.capture`)."""
+    return (m * dq + M_eq * dp) / (m + M_eq), 0.5 * m * M_eq / (m + M_eq) * (dq - dp) ** 2
 
 
 @source(inline=True)
 def release(M, M1, M_eq, dp, dq):
-    """``p'`` just after a separation (m/s): the tip mass ``M_eq`` (kg), which moved with the impact
-    mass at ``q'``, rejoins the main body of mass ``M1 = M - M_eq`` (kg) at ``p'``
-    (:func:`piezo_fmu.model.dynamics.release`)."""
-    return (M1 * dp + M_eq * dq) / M
+    """A separation: the tip mass ``M_eq`` (kg), which moved with the impact mass at ``q'`` (m/s),
+    rejoins the main body of mass ``M1 = M - M_eq`` (kg) at ``p'``. Returns ``p'`` just after (m/s) and
+    the energy lost (J) (:func:`piezo_fmu.model.dynamics.release`)."""
+    return (M1 * dp + M_eq * dq) / M, 0.5 * M1 * M_eq / M * (dp - dq) ** 2
 
 
 @source(inline=True)

@@ -11,9 +11,9 @@ from . import layout as at
 
 
 class Tables:
-    """A damper (``model``) and its drives (``drives``: one :class:`..drive.HarmonicHold` or more,
-    with the same number of nodes a period) packed for the kernel: ``constants`` (the array ``c``) and
-    ``drive`` (one row a drive), host arrays."""
+    """A damper (``model``) and its drives (``drives``: :class:`..drive.HarmonicHold` objects with the
+    same number of nodes a period, none for a march under base inputs of its own) packed for the
+    kernel: ``constants`` (the array ``c``) and ``drive`` (one row a drive), host arrays."""
 
     def __init__(self, model: BatchModel, drives: list):
         free, contact = model.free, model.contact
@@ -26,7 +26,8 @@ class Tables:
         values = {at.A: free.a, at.W2: free.w2, at.BETA2: free.beta2, at.CS_MODE: mode, at.WD: wd,
                   at.BOUND_RATE: free.bound_rate, at.HG: model.half_gap, at.MM: model.M, at.M1: model.M1,
                   at.MI: model.m, at.M_EQ: model.M_eq, at.KK: model.K, at.CC: model.C,
-                  at.COUPLED: 1.0 if model.coupled else 0.0, at.TAU_E: model.tau_e}
+                  at.COUPLED: 1.0 if model.coupled else 0.0, at.TAU_E: model.tau_e, at.K_EQ: model.K_eq,
+                  at.C_EQ: model.C_eq, at.R_LOAD: model.params.R_load}
         n, modes = contact.size, at.MODES
         used, weight = _modes(contact.lam)
         lam, lam2, gain = np.zeros(modes, complex), np.zeros(modes), np.zeros(modes, complex)
@@ -40,6 +41,9 @@ class Tables:
         self.constants = np.concatenate([[values[k] for k in range(at.LAM)], *parts(lam), lam2, *parts(gain),
                                          *parts(qinv), *parts(qm), weights, [float(len(used))]])
         assert self.constants.shape == (at.CONSTANTS,)
+        if not drives:  # a march under base inputs of its own (:func:`input_hold`)
+            self.drive = np.zeros((0, at.NODES))
+            return
         h = np.array([drive.step for drive in drives])
         ec, es = free.coefficients(h)
         nodes = [drive.nodes() for drive in drives]
@@ -67,3 +71,27 @@ def _modes(lam: np.ndarray) -> tuple[list, list]:
             used.append(k)
             weight.append(1.0)
     return used, weight
+
+
+def input_hold(model: BatchModel, step: float) -> np.ndarray:
+    """The constants of a hold step ``step`` (s) for a march under a base input of its own
+    (:mod:`.inputs`, :data:`.layout.HOLD` of them): the step, free flight's coefficients and the
+    voltages' decay over it, as a drive's row has them, free flight's integrals over it (the 8-point
+    Gauss-Legendre rule of :mod:`.ledger`, on as many pieces as it takes there) and a decaying
+    patch's energy into its load."""
+    free = model.free
+    h = float(step)
+    ec, es = (float(value) for value in free.coefficients(np.array(h)))
+    pieces = max(1, math.ceil((math.sqrt(free.w2) + 2.0 * free.a) * h))
+    x, w = np.polynomial.legendre.leggauss(8)
+    width = h / pieces
+    times = (np.arange(pieces)[:, None] + (x[None, :] + 1.0) / 2.0).ravel() * width
+    weights = np.tile(w / 2.0, pieces) * width
+    c, s = free.coefficients(times)
+    hold = np.zeros(at.HOLD)
+    hold[[at.H_STEP, at.H_EC, at.H_ES, at.H_DECAY]] = h, ec, es, math.exp(-h / model.tau_e)
+    hold[[at.H_C, at.H_S, at.H_CC, at.H_CS, at.H_SS]] = (weights @ c, weights @ s, weights @ (c * c),
+                                                         weights @ (c * s), weights @ (s * s))
+    if model.coupled:  # otherwise the engine carries no voltage, and R C_p is infinite (or R 0)
+        hold[at.H_LOAD] = model.tau_e * 0.5 * -math.expm1(-2.0 * h / model.tau_e) / model.params.R_load
+    return hold
