@@ -8,10 +8,10 @@ every phase is linear and unforced:
   ``u(t) = e^{-a t} [c(t) u0 + s(t) (a u0 + u0')]``, ``u'(t) = e^{-a t} [c(t) u0' - s(t) (w_n^2 u0 + a u0')]``
   with ``c = cos(w_d t)``, ``s = sin(w_d t) / w_d`` (underdamped; ``cosh`` and ``sinh`` of ``b t``,
   ``b = sqrt(a^2 - w_n^2)``, overdamped, the series at critical damping), and ``w = w0 + w0' t``.
-  Overdamped, ``e^{-a t} cosh(b t)`` and ``e^{-a t} sinh(b t) / b`` are taken as the two decays they
-  are, ``e^{-(a - b) t} (1 + e^{-2 b t}) / 2`` and ``e^{-(a - b) t} (1 - e^{-2 b t}) / 2b`` with
-  ``a - b = w_n^2 / (a + b)``: ``cosh`` alone would overflow once ``b t`` passes 710 (a main mass
-  damped heavily, or a hold step long against ``M / C``). The impact mass's distance from a barrier,
+  Overdamped, beyond ``a t =`` :data:`DECAYS_APART`, ``e^{-a t} cosh(b t)`` and
+  ``e^{-a t} sinh(b t) / b`` are taken as the two decays they are, ``e^{-(a - b) t} (1 + e^{-2 b t}) / 2``
+  and ``e^{-(a - b) t} (1 - e^{-2 b t}) / 2b`` with ``a - b = w_n^2 / (a + b)``: ``cosh`` alone would
+  overflow once ``b t`` passes 710 (a main mass damped heavily, or a hold step long against ``M / C``). The impact mass's distance from a barrier,
   ``g = +-(w - u) - d/2``, has ``|g''| = |u''| <= (w_n + 2a) sqrt(u'^2 + w_n^2 u^2)``, and that root
   is non-increasing in free flight (``d/dt (u'^2 + w_n^2 u^2) = -4 a u'^2``): a bound that holds
   from any instant on.
@@ -60,6 +60,9 @@ MAX_CONDITION = 1e8
 #: stays near 1e-8 where the modes are at least ``1 / MAX_CONDITION`` apart; beyond this bound a
 #: component of the state has dropped out of the modes (a barrier of 1e-29 N/m: a departure of 1).
 MAX_DEPARTURE = 1e-6
+#: ``a t`` (``a = C / 2M``) up to which overdamped free flight is ``e^{-a t} cosh(b t)`` as it stands
+#: (``b < a``: no overflow, as the engine has always taken it); beyond, its two decays apart.
+DECAYS_APART = 700.0
 #: The largest positive real part of a contact mode taken as 0, relative to the spectral radius: the
 #: rounding level of an event function (an undamped mode comes out of ``eig`` within about 1 ulp).
 ROUNDING = NOISE_ULPS * EPS
@@ -92,10 +95,16 @@ class FreeFlow:
         elif beta2 < 0.0:
             wd = math.sqrt(-beta2)
             c, s = np.cos(wd * t), np.sin(wd * t) / wd
-        else:  # the slow and the fast decay apart (see the module's text)
+        else:
             b = math.sqrt(beta2)
-            slow, apart = np.exp(-self.w2 / (self.a + b) * t), -np.expm1(-2.0 * b * t)
-            return slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
+            near = self.a * np.asarray(t) <= DECAYS_APART
+            if not np.all(near):  # the slow and the fast decay apart (see the module's text)
+                t_far = np.where(near, 0.0, t)
+                slow, apart = np.exp(-self.w2 / (self.a + b) * t_far), -np.expm1(-2.0 * b * t_far)
+                far_c, far_s = slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
+                near_c, near_s = self.coefficients(np.where(near, t, 0.0))
+                return np.where(near, near_c, far_c), np.where(near, near_s, far_s)
+            c, s = np.cosh(b * t), np.sinh(b * t) / b
         decay = np.exp(-self.a * t)
         return decay * c, decay * s
 

@@ -4,6 +4,7 @@ the modal amplitudes kept in ``work``."""
 
 import math
 
+from ..model import DECAYS_APART
 from .layout import A, BETA2, CONTACT_AT, CRITICAL, CS_MODE, GROWTH, LAM, MODES, QM, UNDERDAMPED, USED, W2, WD, WEIGHT
 from .registry import source
 
@@ -18,10 +19,12 @@ def free_coefficients(c, t):
     elif mode == UNDERDAMPED:
         wd = c[WD]
         cos, sin = math.cos(wd * t), math.sin(wd * t) / wd
-    else:  # the slow and the fast decay apart: cosh would overflow
+    else:
         b = c[WD]
-        slow, apart = math.exp(-c[W2] / (c[A] + b) * t), -math.expm1(-2.0 * b * t)
-        return slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
+        if c[A] * t > DECAYS_APART:  # the slow and the fast decay apart: cosh would overflow
+            slow, apart = math.exp(-c[W2] / (c[A] + b) * t), -math.expm1(-2.0 * b * t)
+            return slow * (1.0 - 0.5 * apart), slow * apart / (2.0 * b)
+        cos, sin = math.cosh(b * t), math.sinh(b * t) / b
     decay = math.exp(-c[A] * t)
     return decay * cos, decay * sin
 
