@@ -525,3 +525,28 @@ def test_every_bad_input_is_refused_with_its_value_and_what_is_allowed(case, tmp
     assert "allowed" in message, message
     for word in words:
         assert word in message, (word, message)
+
+
+@pytest.mark.parametrize("M, K, C", [(1.0, 3.679136818588394e-195, 0.1), (1.0, 1000.0, 1e-300), (1e-300, 1e-170, 1e-300)])
+def test_the_oracles_psd_holds_where_the_squares_of_its_denominator_leave_double_range(M, K, C):
+    """A spring or a damper at the edges of the FMU's ranges: ``|H|^2 G`` is the quotient at 50
+    digits (mpmath) wherever that is a double, 0 where the input's density is (at 0 Hz, the
+    high-pass), and no numpy warning is raised (its squares underflow or overflow there)."""
+    import warnings
+
+    excitation = Excitation(KanaiTajimi.soil("firm", LEVEL), 0.004)
+    # beside the resonance (1.01 f_n): at it, a damping of 1e-300 leaves the quotient to the rounding of f
+    frequencies = np.array([0.0, 1e-200, 1e-80, 1e-3, 0.1, 1.01 * math.sqrt(K / M) / (2 * math.pi), 1.0, 24.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = oracle.relative_displacement_psd(excitation, frequencies, M, K, C)
+    with mpmath.workdps(50):
+        for f, value in zip(frequencies, got):
+            density = mpmath.mpf(float(excitation.density(f)))
+            w = 2 * mpmath.pi * mpmath.mpf(f)
+            exact = (density / ((mpmath.mpf(K) / M - w * w) ** 2 + (w * mpmath.mpf(C) / M) ** 2) if density
+                     else mpmath.mpf(0))
+            if exact > np.finfo(float).max:
+                assert value == math.inf, (f, value)
+            else:
+                assert abs(value - exact) <= 1e-13 * exact + np.finfo(float).tiny, (f, value, exact)

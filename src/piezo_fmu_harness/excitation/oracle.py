@@ -47,9 +47,24 @@ def relative_displacement_gain(f, M: float, K: float, C: float) -> np.ndarray:
     return _gain(f, *_oscillator(M, K, C))
 
 
-def _gain(f, M: float, K: float, C: float) -> np.ndarray:
+def _gain(f, M: float, K: float, C: float, numerator=1.0) -> np.ndarray:
+    """``numerator |H(2 pi f)|^2``; where the squares of ``|1 / H|`` leave double range (a spring
+    or a damper at the edges of the FMU's ranges), from the larger part of ``1 / H`` divided out
+    twice, which gives the quotient wherever it is a double (0 where ``numerator`` is)."""
     w = 2.0 * np.pi * np.asarray(f, dtype=float)
-    return 1.0 / ((K / M - w * w) ** 2 + (w * C / M) ** 2)
+    numerator = np.asarray(numerator, dtype=float)
+    with np.errstate(over="ignore", under="ignore"):
+        real, imaginary = K / M - w * w, w * C / M
+        denominator = real**2 + imaginary**2
+    squared = np.isfinite(denominator) & (denominator >= np.finfo(float).tiny)
+    if np.all(squared):
+        return 1.0 / denominator * numerator
+    big = np.maximum(np.abs(real), np.abs(imaginary))
+    small = np.minimum(np.abs(real), np.abs(imaginary))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        ratio = np.where(big > 0.0, small / big, 0.0)
+        apart = np.where(numerator == 0.0, 0.0, numerator / big / big / (1.0 + ratio * ratio))
+        return np.where(squared, 1.0 / denominator * numerator, apart)
 
 
 def acceleration_psd(excitation, f) -> np.ndarray:
@@ -69,7 +84,7 @@ def base_displacement_psd(excitation, f) -> np.ndarray:
 def relative_displacement_psd(excitation, f, M: float, K: float, C: float) -> np.ndarray:
     """``|H(2 pi f)|^2 G(f) |HP(f)|^2``, m^2/Hz: the relative displacement ``p - y`` of the
     linear oscillator ``(M, K, C)`` on the generated base."""
-    return relative_displacement_gain(f, M, K, C) * excitation.density(f)
+    return _gain(f, *_oscillator(M, K, C), numerator=excitation.density(f))
 
 
 def variance(psd, excitation, resonance: float | None = None, width: float | None = None) -> float:
@@ -118,4 +133,4 @@ def relative_displacement_variance(excitation, M: float, K: float, C: float) -> 
     M, K, C = _oscillator(M, K, C)
     resonance = math.sqrt(K / M) / (2.0 * math.pi)
     width = C / M / (4.0 * math.pi)  # zeta w_n in Hz: the half-power half-width of |H|^2
-    return variance(lambda f: _gain(f, M, K, C) * excitation.density(f), excitation, resonance, width)
+    return variance(lambda f: _gain(f, M, K, C, numerator=excitation.density(f)), excitation, resonance, width)
