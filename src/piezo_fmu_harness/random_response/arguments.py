@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from .spec import RandomSpec, build_source, default_warmup
+from .spec import SETTLED, RandomSpec, build_source, default_warmup
 
 #: The kinds ``--psd`` names (anything else is a CSV file's path).
 PSD_KINDS = ("white", "kanai-tajimi", "clough-penzien")
@@ -27,6 +27,9 @@ STEPS_PER_TOP = 10
 REALIZATIONS_AND_WINDOW = {"random": (1000, 300.0), "optimize": (50, 60.0)}
 #: The FMU's start state of every realization: at rest (the base too, ``y = 0``).
 START = {"p0": 0.0, "q0": 0.0, "dp0": 0.0, "dq0": 0.0}
+#: The most hold steps one realization may take, warm-up and window together: a run no machine
+#: finishes (the default warm-up of a main mass damped at 1e-90 N.s/m is 1e90 s) is refused before any work.
+MAX_STEPS = 1e9
 #: The voltage model by default, and those the batch engine carries.
 VOLTAGE_MODEL, VOLTAGE_MODELS = 2, (0, 2)
 
@@ -129,7 +132,7 @@ def damper_values(args, model, instance, given: dict) -> dict:
     (``--load``, else the circuit's estimate of the optimum for these values)."""
     from ..checks import load_value
     from ..circuit import circuit_constants
-    from ..spec import UsageError
+    from ..spec import UsageError, check_with_fmu
 
     values = {**model.defaults(), **given}
     starts = {name: given[name] for name in START if given.get(name, 0.0) != 0.0}
@@ -144,11 +147,15 @@ def damper_values(args, model, instance, given: dict) -> dict:
                          "coupled circuit)")
     if args.load is not None:
         values["R_load"] = load_value(model, args.load, "--load")
-    elif "R_load" not in given:
+    checked = {**given, "voltage_model": values["voltage_model"]}
+    if args.load is not None:
+        checked["R_load"] = values["R_load"]
+    check_with_fmu(model, instance, [checked], "--set")  # before anything is derived from the values
+    if args.load is None and "R_load" not in given:
         values["R_load"] = circuit_constants(instance, values)["R_opt_estimate_ohm"]
     if not values["C"] > 0.0:
-        raise UsageError(f"--set C={values['C']!r}: without damping the main mass's response to a stationary input never "
-                         "settles (its variance grows without end); allowed range (0, inf) N.s/m")
+        raise UsageError(f"--set: C = {values['C']!r} N.s/m: without damping the main mass's response to a stationary "
+                         "input never settles (its variance grows without end); allowed range (0, inf) N.s/m")
     return values
 
 
@@ -200,6 +207,17 @@ def excitation_spec(args, values: dict, command: str, slowest: dict | None = Non
         window = duration
     if window < 2.0 * step:
         raise UsageError(f"--duration {window:g}: the window must hold two steps of {step:g} s at least")
+    steps = (warmup + window) / step
+    if not steps <= MAX_STEPS:
+        why = advice = ""
+        if args.warmup is None and not record and slowest is None:  # C / 2M = zeta w_n sets the default
+            why = f", the default: the linear oscillator's settling ln(1000) / (2 zeta w_n) for C = {values['C']:g} N.s/m"
+            room = MAX_STEPS * step - window
+            if room > 0.0:
+                advice = f", or --set C of at least {values['M'] * math.log(1.0 / SETTLED) / room:.3g} N.s/m"
+        raise UsageError(f"--warmup/--duration/--step: {warmup:g} s of warm-up{why}, and a window of {window:g} s, "
+                         f"make {steps:.3g} steps of {step:g} s a realization; allowed: at most {MAX_STEPS:g} (give a "
+                         f"shorter --warmup or --duration, or a longer --step{advice})")
     seed = whole(0 if args.seed is None else args.seed, "--seed", 0, "the seed is a whole number >= 0")
     return RandomSpec(source, levels, values, count, float(window), float(warmup), float(step), float(f_low),
                       seed=seed, confirm=0)
