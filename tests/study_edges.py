@@ -28,11 +28,14 @@ TINY, HUGE = 5e-324, sys.float_info.max
 #: What is not drawn: the initial state (the studies set it), the integer choices (drawn apart),
 #: and the load (drawn as ``--load``).
 NOT_DRAWN = ("p0", "q0", "dp0", "dq0", "barrier_mode", "voltage_model", "R_load")
-#: Each study at its smallest size, the FMU's checks only one start of each attractor, in this process.
-SMALLEST = {"basins": ["--ratio", "1.2", "--grid", "2"],
-            "fractions": ["--count", "2", "--starts", "1"],
-            "bifurcation": ["--count", "2"]}
-COMMON = ["--max-cycles", "10", "--confirm", "0", "--jobs", "1", "--no-progress", "--force"]
+#: Each study at its smallest size, the FMU's checks only one start of each attractor (one realization
+#: of the random study), in this process.
+PERIODIC = ["--max-cycles", "10", "--confirm", "0"]
+SMALLEST = {"basins": ["--ratio", "1.2", "--grid", "2", *PERIODIC],
+            "fractions": ["--count", "2", "--starts", "1", *PERIODIC],
+            "bifurcation": ["--count", "2", *PERIODIC],
+            "random": ["--realizations", "2", "--duration", "1", "--confirm", "1"]}
+COMMON = ["--jobs", "1", "--no-progress", "--force"]
 
 
 def draw_value(rng, bound) -> float:
@@ -62,10 +65,17 @@ def draw_damper(rng) -> tuple[dict, list[str]]:
     return values, options
 
 
-def study_runs(values: dict, options: list[str], out) -> list[list[str]]:
-    """The argument lists of the three studies on the damper ``values``, results under ``out``."""
+def study_runs(values: dict, options: list[str], out, studies=tuple(SMALLEST)) -> list[list[str]]:
+    """The argument lists of the batch ``studies`` on the damper ``values``, results under ``out``.
+    The random study takes voltage models 0 and 2 only (it refuses 1 by its option's name): it is
+    marched with its default, 2, where 1 was drawn."""
     sets = [text for name, value in values.items() for text in ("--set", f"{name}={value!r}")]
-    return [[study, *size, *sets, *options, *COMMON, "--out", f"{out}/{study}"] for study, size in SMALLEST.items()]
+    pairs = list(zip(options[::2], options[1::2]))
+    runs = []
+    for study in studies:
+        extra = [text for pair in pairs if study != "random" or pair != ("--voltage-model", "1") for text in pair]
+        runs.append([study, *SMALLEST[study], *sets, *extra, *COMMON, "--out", f"{out}/{study}"])
+    return runs
 
 
 CHILD = r"""
