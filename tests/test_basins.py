@@ -220,6 +220,19 @@ def test_an_impact_mass_of_no_weight_is_marched_and_the_fmu_agrees(tmp_path, cap
     assert checks["checked"] >= 2 and checks["agree"] == checks["checked"]
 
 
+def test_a_map_with_no_entropy_writes_strict_json(tmp_path):
+    """Every start undecided (a budget of 10 periods): the basin entropy has no cells to come from
+    and is written null, not ``NaN``, which strict JSON readers (``jq``, a browser) refuse."""
+    assert run_cli("basins", "--ratio", 1.2, "--grid", 2, "--max-cycles", 10, "--confirm", 0, "--jobs", 1,
+                   "--fmu", FMU, "--no-progress", "--out", tmp_path) == 0
+
+    def refuse(constant):
+        raise ValueError(f"not strict JSON: {constant}")
+
+    summary = json.loads((tmp_path / "summary.json").read_text(), parse_constant=refuse)
+    assert summary["undecided"]["share"] == 1.0 and summary["boundary"]["basin_entropy"] is None
+
+
 def test_a_process_that_ran_another_study_first_finds_the_batch_engine(tmp_path):
     """The first FMU a process loads gives it its ``piezo_fmu``; a study that ran before the basin
     map, and removed its FMU's folder, must not take the batch engine's files with it."""

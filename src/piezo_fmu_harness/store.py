@@ -24,6 +24,8 @@ import os
 from pathlib import Path
 from typing import Callable, Optional
 
+import numpy as np
+
 from .spec import UsageError, prepare_output_dir
 
 SPEC_FILE = "sweep.json"
@@ -159,15 +161,23 @@ class PointStore:
 
 
 def jsonable(value):
-    """``value`` with every number that is not finite as null: JSON has no NaN, and a record is
-    written strictly."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
+    """``value`` with every number that is not finite as null: JSON has no NaN, and a record or a
+    summary is written strictly (numpy's scalars as Python's numbers)."""
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
     if isinstance(value, dict):
         return {key: jsonable(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
         return [jsonable(item) for item in value]
     return value
+
+
+def write_json(path: Path, data) -> None:
+    """``data`` as strict JSON, indented (what is not finite as null, see :func:`jsonable`): a
+    study's summary that any JSON reader takes."""
+    path.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
 
 
 def _record(line: bytes, check: Optional[Callable[[dict], None]]) -> dict:

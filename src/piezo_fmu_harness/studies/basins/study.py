@@ -42,7 +42,7 @@ from ...starts.attractors import boundary, merge, shares
 from ...starts.chunks import check_chunk, chunks
 from ...starts.fmu_checks import tally
 from ...starts.transients import counts, escape
-from ...store import open_folder, within
+from ...store import open_folder, within, write_json
 from ...wording import per_cycle
 
 HEADER_FILE = "basins.json"
@@ -216,7 +216,7 @@ def write(spec: BasinSpec, found: list[dict], starts: dict, checks: list[dict], 
               "fmu_checks": {**tally(checks, times["checking_s"]),
                              "starts": [{**c, "study": relabel.get(c["study"]), "fmu": relabel.get(c["fmu"])}
                                         for c in checks]}}
-    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_json(folder / "summary.json", report)
     return report
 
 

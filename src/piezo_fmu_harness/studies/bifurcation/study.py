@@ -54,6 +54,7 @@ import numpy as np
 from ...datasets import bands
 from ...periodic.band import FrequencySpec
 from ...starts.transients import NONE_SEEN, ONSET, REACH
+from ...store import write_json
 
 DIRECTIONS = ("up", "down")
 #: The files a diagram writes besides its header and ``points.jsonl`` (:mod:`.chains`).
@@ -268,5 +269,5 @@ def write(spec: FrequencySpec, sweeps: list[dict], folder: Path, times: dict, ch
     csv_frame(frame, units_of(ds)).to_csv(folder / "bifurcation.csv", index=False)
     (folder / "points.json").write_text(json.dumps({"values": spec.values, "sweeps": sweeps}) + "\n")
     report = summarize(ds, {"wall_s": time.perf_counter() - begin, **times}, checked, sweeps)
-    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_json(folder / "summary.json", report)
     return report

@@ -28,7 +28,7 @@ import numpy as np
 
 from ...periodic.band import solve_chain
 from ...periodic.steady_state import Settings as SteadySettings
-from ...store import jsonable
+from ...store import jsonable, write_json
 from .branches import distance_to_branch, trace_branch
 from .tracer import Problem, Settings
 
@@ -272,7 +272,7 @@ def write(study: Continuation, folder: Path, parameter_units: str) -> list[Path]
         files[1], index=False)
     csv_frame(ds.drop_dims(["point", "coordinate", "multiplier"]).to_dataframe().reset_index(), units).to_csv(
         files[2], index=False)
-    files[3].write_text(json.dumps(summarize(study), indent=2) + "\n")
+    write_json(files[3], summarize(study))
     with open(files[4], "w") as out:
         for chain in study.chains:
             for record in chain["records"]:

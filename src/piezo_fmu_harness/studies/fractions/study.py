@@ -58,7 +58,7 @@ import numpy as np
 from ...starts.attractors import merge, shares, track_names
 from ...starts.fmu_checks import confirm, tally
 from ...starts.chunks import check_chunk, chunk_size
-from ...store import Damaged, open_folder, require, within
+from ...store import Damaged, open_folder, require, within, write_json
 
 HEADER_FILE = "fractions.json"
 #: The files a fractions study writes besides its header and ``points.jsonl``.
@@ -273,5 +273,5 @@ def write(spec: FractionSpec, found: list[dict], starts: dict, checks: list[dict
               "fmu_checks": {**tally(checks, times["checking_s"]),
                              "starts": [{**c, "study": names[c["study"]] if c["study"] is not None else None,
                                          "fmu": names[c["fmu"]] if c["fmu"] is not None else None} for c in checks]}}
-    (folder / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_json(folder / "summary.json", report)
     return report

@@ -11,9 +11,7 @@ the window ``T``), and the energy ledger's largest imbalance relative to the bas
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -108,22 +106,3 @@ def psd(spec: RandomSpec, done: dict) -> tuple[np.ndarray, dict]:
     densities = {tuple((int(key.split(":")[0]), key.split(":")[1])): welch_density(s, n, spec.step, length)
                  for key, (s, n) in sums.items()}
     return frequencies, densities
-
-
-def json_safe(data):
-    """``data`` with every non-finite float made ``None`` (null in JSON): an interval that one
-    realization cannot give, as from ``--record``, is absent, not a number."""
-    if isinstance(data, dict):
-        return {key: json_safe(value) for key, value in data.items()}
-    if isinstance(data, (list, tuple)):
-        return [json_safe(value) for value in data]
-    if isinstance(data, (float, np.floating)):
-        return float(data) if math.isfinite(data) else None
-    if isinstance(data, np.integer):
-        return int(data)
-    return data
-
-
-def write_json(path: Path, data) -> None:
-    """``data`` as strict JSON (non-finite floats written as null, see :func:`json_safe`)."""
-    path.write_text(json.dumps(json_safe(data), indent=2, allow_nan=False) + "\n")

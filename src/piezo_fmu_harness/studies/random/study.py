@@ -33,7 +33,8 @@ import numpy as np
 
 from ...store import Damaged, open_folder, require, within
 from ...random_response.march import DAMPERS, march_chunk
-from .results import MEASURES, arrays, psd, summarize, write_json
+from ...store import write_json
+from .results import MEASURES, arrays, psd, summarize
 from ...random_response.spec import RandomSpec
 
 HEADER_FILE = "random.json"
