@@ -178,6 +178,8 @@ def test_one_realizations_bits_do_not_depend_on_the_others_the_workers_or_the_bl
                             "--set C of at least 1.73e-06 N.s/m"]),
     (("--warmup", 1e300), ["1e+300 s of warm-up", "allowed: at most 1e+09"]),
     (("--set", "K=1e23"), ["the FMU rejects K = 1e+23", "allowed range: at least 1e-09 s"]),
+    (("--set", "t_p=5e-324", "--set", "rho_p=5e-324", "--set", "g31=1e308", "--set", "barrier_mode=1"),
+     ["--load: the default load R_load = 1/(omega_c C_p) = 0 Ohm", "allowed range (0, inf) Ohm", "C_p = inf F"]),
     (("--realizations", 3, "--save-input", 3), ["--save-input 3", "allowed range [0, 2]"]),
     (("--envelope", "jennings:1,2"), ["--envelope jennings:1,2", "3 numbers"]),
     (("--band", 1, 20), ["--band 1 20", "allowed: --band 0 FMAX"]),

@@ -32,12 +32,20 @@ def circuit_constants(instance: Instance, values: dict) -> dict:
 
 def default_load(instance: Instance, values: dict) -> float:
     """The default load of the studies of the forced response: ``R_opt`` (:func:`circuit_constants`)
-    to 6 digits; refused (:class:`~piezo_fmu_harness.spec.UsageError`) when the patch's values leave
-    it no finite resistance > 0 (a capacitance of 0 or inf F in double precision)."""
+    to 6 digits; refused as :func:`optimum_load` refuses it."""
+    return optimum_load(instance, values, digits=6)
+
+
+def optimum_load(instance: Instance, values: dict, digits: int | None = None) -> float:
+    """``R_opt`` (:func:`circuit_constants`), to ``digits`` significant digits if given; refused
+    (:class:`~piezo_fmu_harness.spec.UsageError`) when the patch's values leave it no finite
+    resistance > 0 (a capacitance of 0 or inf F in double precision)."""
     from .spec import UsageError
 
     constants = circuit_constants(instance, values)
-    load = float(f"{constants['R_opt_estimate_ohm']:.6g}")
+    load = constants["R_opt_estimate_ohm"]
+    if digits is not None:
+        load = float(f"{load:.{digits}g}")
     if not 0.0 < load < math.inf:
         shown = ", ".join(f"{name} = {value!r}" for name, value in values.items())
         raise UsageError(f"--load: the default load R_load = 1/(omega_c C_p) = {load:g} Ohm is out of its allowed "

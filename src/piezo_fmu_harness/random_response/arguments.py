@@ -131,7 +131,7 @@ def damper_values(args, model, instance, given: dict) -> dict:
     ``given`` (``--set``), from rest, the voltage model (``--voltage-model``, 0 or 2) and the load
     (``--load``, else the circuit's estimate of the optimum for these values)."""
     from ..checks import load_value
-    from ..circuit import circuit_constants
+    from ..circuit import optimum_load
     from ..spec import UsageError, check_with_fmu
 
     values = {**model.defaults(), **given}
@@ -152,7 +152,7 @@ def damper_values(args, model, instance, given: dict) -> dict:
         checked["R_load"] = values["R_load"]
     check_with_fmu(model, instance, [checked], "--set")  # before anything is derived from the values
     if args.load is None and "R_load" not in given:
-        values["R_load"] = circuit_constants(instance, values)["R_opt_estimate_ohm"]
+        values["R_load"] = optimum_load(instance, values)
     if not values["C"] > 0.0:
         raise UsageError(f"--set: C = {values['C']!r} N.s/m: without damping the main mass's response to a stationary "
                          "input never settles (its variance grows without end); allowed range (0, inf) N.s/m")
