@@ -114,8 +114,11 @@ def test_a_trajectorys_bits_do_not_depend_on_the_cut_of_its_input_or_on_its_batc
 def test_a_hold_steps_free_flight_integrals_are_the_closed_forms_integrated_by_quad(C):
     """The constants a free hold step's flows use (``input_hold``: the 8-point Gauss-Legendre rule on
     pieces of the step) against ``scipy.integrate.quad`` of the same closed forms, underdamped,
-    critically damped (``C = 2 sqrt(K M)``) and overdamped, to 1e-13."""
-    model = BatchModel.of(Parameters(C=C))
+    critically damped (``C = 2 sqrt(K M)``) and overdamped, to 1e-13; and a patch's decaying energy
+    into its load where the circuit acts back (voltage model 2), none where the engine carries no
+    voltage (voltage model 1: ``R C_p`` is then no decay time of the engine's)."""
+    assert input_hold(BatchModel.of(Parameters(C=C, voltage_model=1)), 0.01)[layout.H_LOAD] == 0.0
+    model = BatchModel.of(Parameters(C=C, voltage_model=2))
     h = 0.01
     hold = input_hold(model, h)
 

@@ -116,10 +116,11 @@ print(digest.hexdigest())
 
 def test_four_processes_that_compile_into_an_empty_cache_at_once_take_turns_and_march_the_same_bits(tmp_path):
     """Four processes started together on an empty ``NUMBA_CACHE_DIR`` (a Dask cluster's workers at
-    their first task): every one finishes, with the bits of this process's kernel, and the compiled
-    code is saved by one of them only, the others load it (the first call of each entry point holds
-    the cache folder's lock). Without the lock each process saves its own compilation into the same
-    index, and a version number may come to point at another process's code."""
+    their first task): every one finishes, with the bits of this process's kernel, and each piece of
+    compiled code is saved once, by whichever process reached its entry point first, the others load
+    it (the first call of each entry point holds the cache folder's lock). Without the lock each
+    process saves its own compilation into the same index (20 to 22 saves in every process), and a
+    version number may come to point at another process's code."""
     here = subprocess.run([sys.executable, "-c", EVERY_ENTRY], capture_output=True, text=True, timeout=900,
                           cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
     assert here.returncode == 0, here.stderr[-3000:]
@@ -131,5 +132,6 @@ def test_four_processes_that_compile_into_an_empty_cache_at_once_take_turns_and_
     assert [process.returncode for process in processes] == [0, 0, 0, 0], [err[-2000:] for _, err in outputs]
     digests = [out.strip().splitlines()[-1] for out, _ in outputs]
     assert digests == [here.stdout.strip().splitlines()[-1]] * 4
-    savers = [out.count("data saved") for out, _ in outputs]
-    assert sum(1 for count in savers if count) == 1 and max(savers) > 10, savers
+    saved = [line.split("data saved to", 1)[1].strip() for out, _ in outputs for line in out.splitlines()
+             if "data saved to" in line]
+    assert len(saved) > 10 and len(set(saved)) == len(saved), sorted(saved)  # each compiled once, by one process
