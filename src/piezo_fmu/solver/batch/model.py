@@ -61,7 +61,7 @@ MAX_CONDITION = 1e8
 #: component of the state has dropped out of the modes (a barrier of 1e-29 N/m: a departure of 1).
 MAX_DEPARTURE = 1e-6
 #: ``a t`` (``a = C / 2M``) up to which overdamped free flight is ``e^{-a t} cosh(b t)`` as it stands
-#: (``b < a``: no overflow, as the engine has always taken it); beyond, its two decays apart.
+#: (``b < a``: no overflow); beyond, its two decays apart, which hold at any ``a t``.
 DECAYS_APART = 700.0
 #: The largest positive real part of a contact mode taken as 0, relative to the spectral radius: the
 #: rounding level of an event function (an undamped mode comes out of ``eig`` within about 1 ulp).
