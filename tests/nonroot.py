@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import pwd
 import shutil
+import stat
 import subprocess
 import sys
 import sysconfig
@@ -102,6 +103,10 @@ def python_env(name: Optional[str], folder: Path, sources: Path) -> tuple[Path, 
                    env={**os.environ, **variables})
     site_packages = Path(sysconfig.get_paths(vars={"base": str(venv), "platbase": str(venv)})["purelib"])
     ours = sysconfig.get_paths()["purelib"]
+    private = [str(path) for path in (Path(ours), *Path(ours).parents) if not path.stat().st_mode & stat.S_IXOTH]
+    assert name is None or not private, (
+        f"the user {name} cannot read this environment's packages in {ours}: {private[-1]} is private to its "
+        "owner (mktemp -d makes such a folder); run the suite from a clone that other users can read")
     (site_packages / "piezo_fmu_nonroot.pth").write_text(f"{sources}\nimport site; site.addsitedir({ours!r})\n")
     script = venv / "bin" / "piezo-fmu"
     script.write_text(f"#!{venv / 'bin' / 'python'}\nimport sys\nfrom piezo_fmu_harness.cli import main\n"
